@@ -1,0 +1,1 @@
+"""py_trees behaviours wrapping skills, condition checks and recovery composites."""

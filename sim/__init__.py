@@ -1,0 +1,1 @@
+"""The pybullet world: PSMs, needle, phantom, stereo endoscope, faults and ground truth."""

@@ -1,0 +1,24 @@
+"""The interfaces skills and algorithms talk to; the simulation (or a real dVRK) implements them."""
+
+from suture_bt.interfaces.camera_model import CameraModel, StereoCameraModel
+from suture_bt.interfaces.robot import (
+    Clock,
+    JawInterface,
+    JointState,
+    PSMInterface,
+    StereoCameraInterface,
+    StereoFrame,
+    WorldInterface,
+)
+
+__all__ = [
+    "CameraModel",
+    "Clock",
+    "JawInterface",
+    "JointState",
+    "PSMInterface",
+    "StereoCameraInterface",
+    "StereoCameraModel",
+    "StereoFrame",
+    "WorldInterface",
+]

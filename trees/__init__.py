@@ -1,0 +1,1 @@
+"""Tree factories: ``create_tree(...)`` for the full suture, one throw, calibration, ..."""
