@@ -19,6 +19,9 @@ from suture_bt.kinematics.psm import (
 )
 
 
+_LOWER, _UPPER = JOINT_LIMITS[:, 0].copy(), JOINT_LIMITS[:, 1].copy()
+
+
 class UnreachablePoseError(ValueError):
     """The requested tip pose has no IK solution inside the joint limits; ``reason`` says why."""
 
@@ -31,15 +34,28 @@ def _wrap(angle: float) -> float:
     return float((angle + np.pi) % (2 * np.pi) - np.pi)
 
 
+def _rot_x(a: float) -> np.ndarray:
+    c, s = np.cos(a), np.sin(a)
+    return np.array([[1.0, 0.0, 0.0], [0.0, c, -s], [0.0, s, c]])
+
+
+def _rot_z(a: float) -> np.ndarray:
+    c, s = np.cos(a), np.sin(a)
+    return np.array([[c, -s, 0.0], [s, c, 0.0], [0.0, 0.0, 1.0]])
+
+
+_RX_MINUS_HALF_PI = _rot_x(-np.pi / 2)
+
+
 def _wrist_from_pitch_axis(q123: np.ndarray, z5: np.ndarray, x5: np.ndarray, R7: np.ndarray):
-    """q4, q5, q6 for a chosen wrist-pitch axis direction z5 (world/base frame)."""
+    """q4, q5, q6 given the wrist-pitch axis z5 and frame-5 x axis x5 (base frame)."""
     R3 = frame_transforms(np.r_[q123, 0, 0, 0], upto=3)[-1][:3, :3]
     z5_3 = R3.T @ z5  # pitch axis = frame-4 y axis = (-sin q4, cos q4, 0) in frame 3
     q4 = np.arctan2(-z5_3[0], z5_3[1])
-    R4 = frame_transforms(np.r_[q123, q4, 0, 0], upto=4)[-1][:3, :3]
+    R4 = R3 @ _rot_z(q4)  # α4 = 0, θ4 = q4
     x5_4 = R4.T @ x5  # = (cos a, 0, -sin a), a = q5 - π/2
     q5 = np.arctan2(-x5_4[2], x5_4[0]) + np.pi / 2
-    R5 = frame_transforms(np.r_[q123, q4, q5, 0], upto=5)[-1][:3, :3]
+    R5 = R4 @ _RX_MINUS_HALF_PI @ _rot_z(q5 - np.pi / 2)
     x6 = -R7[:, 1]  # tip y = -(frame-6 x)
     x6_5 = R5.T @ x6  # = (cos b, 0, -sin b), b = q6 - π/2
     q6 = np.arctan2(-x6_5[2], x6_5[0]) + np.pi / 2
@@ -85,7 +101,7 @@ def inverse_kinematics(T_tip: np.ndarray, q_current=None) -> np.ndarray:
     joint(s) when neither is inside the limits.
     """
     branches = ik_branches(T_tip)
-    feasible = [q for q in branches if not limit_violations(q)]
+    feasible = [q for q in branches if in_limits(q)]
     if not feasible:
         reasons = "; ".join(limit_violations(branches[0]))
         raise UnreachablePoseError(f"no IK solution inside the joint limits: {reasons}")
@@ -98,7 +114,7 @@ def inverse_kinematics(T_tip: np.ndarray, q_current=None) -> np.ndarray:
     return min(feasible, key=lambda q: float(np.sum(np.abs(q - qc))))
 
 
-def in_limits(q) -> bool:
-    """True when every joint of q is inside its limit."""
+def in_limits(q, tol: float = 1e-9) -> bool:
+    """True when every joint of q is inside its limit (within ``tol``)."""
     q = np.asarray(q)
-    return bool(np.all(q >= JOINT_LIMITS[:, 0]) and np.all(q <= JOINT_LIMITS[:, 1]))
+    return bool(np.all(q >= _LOWER - tol) and np.all(q <= _UPPER + tol))
