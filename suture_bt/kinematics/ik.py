@@ -18,7 +18,6 @@ from suture_bt.kinematics.psm import (
     limit_violations,
 )
 
-
 _LOWER, _UPPER = JOINT_LIMITS[:, 0].copy(), JOINT_LIMITS[:, 1].copy()
 
 
