@@ -1,0 +1,181 @@
+"""High-level joint PI servo on top of the arm's low-level servo (seed Fig. 1a), stepwise.
+
+The low-level joint servo of each arm leaves a steady-state error (load, friction, limited
+bandwidth; DESIGN.md §5). This loop runs at a fixed simulated rate as a world periodic
+callback (``world.add_periodic(1 / rate, servo.update)``), reads ``measured_jp``, and sends
+``servo_jp`` = desired + PI correction, so the integrator removes the steady-state error.
+
+With an offset estimate Δq̂ (joints 1-3) the loop works on TRUE joints: it compares the desired
+q_d with q̂ = q_meas + Δq̂ and sends (q_d + correction) − Δq̂; see
+:mod:`suture_bt.control.offset_compensation` for the derivation from the offset model. With
+Δq̂ = Δq the true joints converge to q_d.
+
+Anti-windup is conditional integration: a joint whose output is saturated (at a joint limit or
+at ``max_correction``) stops integrating while its error pushes further into saturation; the
+integrator is also bounded by ``integrator_limit``. Every quantity of the last update is kept
+on the object (desired, measured, estimate, error, integrator, correction, commanded).
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable
+from dataclasses import dataclass, field
+from typing import Protocol
+
+import numpy as np
+
+from suture_bt.control.offset_compensation import command_for_true, full_offset, true_from_measured
+from suture_bt.kinematics import JOINT_LIMITS, NUM_JOINTS
+
+
+class JointServoArm(Protocol):
+    """What the PI servo needs of an arm (a subset of PSMInterface)."""
+
+    def measured_jp(self) -> np.ndarray: ...
+    def servo_jp(self, jp) -> None: ...
+
+
+def _per_joint(value, name: str) -> np.ndarray:
+    v = np.broadcast_to(np.asarray(value, dtype=float), (NUM_JOINTS,)).copy()
+    if np.any(~np.isfinite(v)) or np.any(v < 0):
+        raise ValueError(f"{name} must be finite and non-negative per joint, got {v}")
+    return v
+
+
+@dataclass(frozen=True)
+class PIGains:
+    """Per-joint gains (SI units; kp dimensionless, ki in 1/s) and output bounds.
+
+    Why these defaults: the low-level servo already tracks the feed-forward q_d with a lag of a
+    few tens of ms and leaves a load-induced steady-state error; the integrator is what removes
+    that error, so ki sets how fast it goes (time constant 1/ki ≈ 0.1 s, about 3-5× slower than
+    the low-level lag, which keeps the loop well damped with the one-sample delay of a 200 Hz
+    loop). kp adds stiffness against the load during motion but is kept low because the
+    low-level lag makes a high proportional gain ring. ``max_correction`` bounds how far the
+    loop may push beyond the desired value (a few times the worst expected steady-state
+    error, 1.5° / 0.1 mm): a broken arm or a collision cannot make it drive the joint far.
+    """
+
+    kp: np.ndarray = field(default_factory=lambda: np.full(NUM_JOINTS, 0.3))
+    ki: np.ndarray = field(default_factory=lambda: np.full(NUM_JOINTS, 10.0))
+    max_correction: np.ndarray = field(
+        default_factory=lambda: np.array([0.15, 0.15, 0.005, 0.15, 0.15, 0.15])
+    )
+    integrator_limit: np.ndarray = field(
+        default_factory=lambda: np.array([0.15, 0.15, 0.005, 0.15, 0.15, 0.15])
+    )
+
+    def __post_init__(self):
+        for name in ("kp", "ki", "max_correction", "integrator_limit"):
+            object.__setattr__(self, name, _per_joint(getattr(self, name), name))
+
+
+class PIServo:
+    """Joint PI loop with offset compensation for one arm; call :meth:`update` periodically."""
+
+    def __init__(
+        self,
+        arm: JointServoArm,
+        rate: float = 200.0,
+        gains: PIGains | None = None,
+        offset_estimate=(0.0, 0.0, 0.0),
+        enabled: bool = True,
+        joint_limits: np.ndarray = JOINT_LIMITS,
+    ):
+        if not np.isfinite(rate) or rate <= 0:
+            raise ValueError(f"rate must be positive, got {rate}")
+        self.arm = arm
+        self.rate = float(rate)
+        self.dt = 1.0 / self.rate
+        self.gains = gains or PIGains()
+        self.enabled = enabled
+        self.joint_limits = np.asarray(joint_limits, dtype=float)
+        self.offset_estimate = full_offset(offset_estimate)
+        self.desired: np.ndarray | None = None
+        self.measured = np.zeros(NUM_JOINTS)
+        self.estimate = np.zeros(NUM_JOINTS)
+        self.error = np.zeros(NUM_JOINTS)
+        self.integrator = np.zeros(NUM_JOINTS)
+        self.correction = np.zeros(NUM_JOINTS)
+        self.output = np.zeros(NUM_JOINTS)
+        self.commanded = np.zeros(NUM_JOINTS)
+        self.saturated = np.zeros(NUM_JOINTS, dtype=bool)
+        self.updates = 0
+        self.last_time: float | None = None
+
+    # -- setpoints -------------------------------------------------------------------------
+    def servo_jp(self, q_desired) -> None:
+        """Set the desired TRUE joints (the next update acts on it); never blocks."""
+        q = np.asarray(q_desired, dtype=float).reshape(-1)
+        if q.shape != (NUM_JOINTS,) or not np.all(np.isfinite(q)):
+            raise ValueError(f"desired joints must be {NUM_JOINTS} finite values, got {q}")
+        self.desired = q.copy()
+
+    def setpoint_jp(self) -> np.ndarray:
+        """The desired TRUE joints (the current estimate when nothing was set yet)."""
+        return self.desired.copy() if self.desired is not None else self.estimated_jp()
+
+    def estimated_jp(self) -> np.ndarray:
+        """Estimate of the TRUE joints: measured + Δq̂."""
+        return true_from_measured(self.arm.measured_jp(), self.offset_estimate)
+
+    def set_offset_estimate(self, offset) -> None:
+        """Use a new Δq̂ (joints 1-3); the integrator is kept (it models the load, not Δq)."""
+        self.offset_estimate = full_offset(offset)
+
+    def reset(self, hold_current: bool = True) -> None:
+        """Zero the integrator; optionally make the current estimate the desired value."""
+        self.integrator[:] = 0.0
+        self.desired = self.estimated_jp() if hold_current else None
+
+    # -- the loop --------------------------------------------------------------------------
+    def update(self, t: float | None = None) -> None:
+        """One loop iteration: read, compute, send (signature fits ``world.add_periodic``)."""
+        self.last_time = t
+        self.measured = np.asarray(self.arm.measured_jp(), dtype=float).copy()
+        self.estimate = true_from_measured(self.measured, self.offset_estimate)
+        if self.desired is None:
+            self.desired = self.estimate.copy()
+        q_d = self.desired
+        g = self.gains
+        lo, hi = self.joint_limits[:, 0], self.joint_limits[:, 1]
+        e = q_d - self.estimate
+        self.error = e
+        if self.enabled:
+            integ = np.clip(
+                self.integrator + g.ki * e * self.dt, -g.integrator_limit, g.integrator_limit
+            )
+            raw = g.kp * e + integ
+            corr = np.clip(raw, -g.max_correction, g.max_correction)
+            out = np.clip(q_d + corr, lo, hi)
+            # Conditional integration: hold a saturated joint's integrator while the error
+            # pushes further into the saturation.
+            excess = (q_d + raw) - out
+            self.saturated = np.abs(excess) > 1e-15
+            hold = self.saturated & (np.sign(e) == np.sign(excess))
+            self.integrator = np.where(hold, self.integrator, integ)
+        else:
+            out = np.clip(q_d, lo, hi)
+            self.saturated = out != q_d
+        self.correction = out - q_d
+        self.output = out
+        self.commanded = command_for_true(out, self.offset_estimate)
+        self.arm.servo_jp(self.commanded)
+        self.updates += 1
+
+    def attach(self, add_periodic: Callable[[float, Callable[[float], None]], object]) -> object:
+        """Register :meth:`update` at this rate: ``servo.attach(world.add_periodic)``."""
+        return add_periodic(self.dt, self.update)
+
+    def state(self) -> dict[str, np.ndarray]:
+        """Observable state of the last update (copies), for logging and tests."""
+        return {
+            "desired": self.setpoint_jp(),
+            "measured": self.measured.copy(),
+            "estimate": self.estimate.copy(),
+            "error": self.error.copy(),
+            "integrator": self.integrator.copy(),
+            "correction": self.correction.copy(),
+            "commanded": self.commanded.copy(),
+            "offset_estimate": self.offset_estimate.copy(),
+        }
