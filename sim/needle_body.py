@@ -1,0 +1,316 @@
+"""The needle in pybullet: drawn as its true-thickness mesh, colliding as a chain of spheres.
+
+States: *free* (dynamic: falls and comes to rest on the tissue), *held* (a fixed constraint to
+an arm link) and *frozen* (a fixed constraint to the world: the tissue holds an inserted,
+released needle). Collisions with the tissue bodies are off while held or frozen (the needle
+passes through tissue) and come back once a released needle is clear of them.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+import pybullet as p
+
+from suture_bt.geometry.needle import NeedleModel
+from suture_bt.sim.needle_mesh import write_needle_obj
+from suture_bt.sim.rendering import load_renderer
+from suture_bt.transforms import invert, make_transform, matrix_from_quat_xyzw, quat_xyzw
+
+#: Simulated mass. The real needle weighs about 0.07 g; a heavier one keeps contacts stable at
+#: 1 kHz and changes nothing else (the needle is only ever resting, held or frozen).
+NEEDLE_MASS = 0.002
+#: Collision spheres along the arc (only for contacts; the visual is the exact mesh).
+N_COLLISION_SPHERES = 24
+NEEDLE_RGBA = (0.62, 0.63, 0.66, 1.0)
+NEEDLE_SPECULAR = (0.9, 0.9, 0.9)
+#: Force limit of the grasp/tissue constraints (N): far above the needle's weight.
+HOLD_FORCE = 50.0
+
+
+def _pose(position, quat) -> np.ndarray:
+    return make_transform(matrix_from_quat_xyzw(quat), position)
+
+
+def arc_inertia(model: NeedleModel, mass: float) -> tuple[np.ndarray, np.ndarray]:
+    """Centre of mass (needle frame) and principal inertia diagonal of a thin arc of wire.
+
+    The needle frame's axes are principal axes of the arc only about the COM when the arc is
+    symmetric about a needle-frame axis; it is not, so the full tensor is computed and its
+    off-diagonal term is dropped (it is below 5 % of the diagonal for this arc and the needle
+    only rests, is held or frozen).
+    """
+    a = np.linspace(model.base_angle, model.tip_angle, 721)
+    pts = model.point_at(a)
+    com = pts.mean(0)
+    d = pts - com
+    m = mass / len(pts)
+    inertia = m * np.array(
+        [(d[:, 1] ** 2 + d[:, 2] ** 2).sum(), (d[:, 0] ** 2 + d[:, 2] ** 2).sum(), (d**2).sum()]
+    )
+    ring = 0.5 * mass * model.wire_radius**2  # wire cross-section, keeps all entries > 0
+    return com, inertia + ring
+
+
+class NeedleBody:
+    """The needle body in one pybullet client (never the default client)."""
+
+    def __init__(
+        self,
+        client: int,
+        model: NeedleModel,
+        T_world_needle: np.ndarray,
+        tissue_ids: tuple[int, ...] = (),
+        mass: float = NEEDLE_MASS,
+    ) -> None:
+        self.client = client
+        self.model = model
+        load_renderer(client)  # bodies created before the EGL plugin loads are never drawn
+        self._com, inertia = arc_inertia(model, mass)
+        self._T_needle_com = make_transform(position=self._com)
+        mesh = write_needle_obj(model)
+        vis = p.createVisualShape(
+            p.GEOM_MESH,
+            fileName=str(mesh),
+            meshScale=[1.0, 1.0, 1.0],
+            rgbaColor=list(NEEDLE_RGBA),
+            specularColor=list(NEEDLE_SPECULAR),
+            visualFramePosition=list(-self._com),
+            physicsClientId=client,
+        )
+        centres = model.point_at(
+            np.linspace(model.base_angle, model.tip_angle, N_COLLISION_SPHERES)
+        )
+        col = p.createCollisionShapeArray(
+            shapeTypes=[p.GEOM_SPHERE] * N_COLLISION_SPHERES,
+            radii=[model.wire_radius] * N_COLLISION_SPHERES,
+            collisionFramePositions=[list(c - self._com) for c in centres],
+            physicsClientId=client,
+        )
+        T_world_com = np.asarray(T_world_needle) @ self._T_needle_com
+        self.id = p.createMultiBody(
+            baseMass=mass,
+            baseCollisionShapeIndex=col,
+            baseVisualShapeIndex=vis,
+            basePosition=list(T_world_com[:3, 3]),
+            baseOrientation=list(quat_xyzw(T_world_com[:3, :3])),
+            physicsClientId=client,
+        )
+        p.changeDynamics(
+            self.id,
+            -1,
+            localInertiaDiagonal=list(inertia),
+            lateralFriction=0.8,
+            spinningFriction=1e-4,
+            rollingFriction=1e-4,
+            linearDamping=0.1,
+            angularDamping=0.1,
+            physicsClientId=client,
+        )
+        self._tissue: list[int] = []
+        self._tissue_enabled = True
+        self._constraint: int | None = None
+        self._held_by: tuple[int, int] | None = None
+        self._T_link_needle: np.ndarray | None = None
+        self._frozen = False
+        self._pending_tissue = False
+        for b in tissue_ids:
+            self.add_tissue(b)
+
+    # --- pose -------------------------------------------------------------------------------
+    def pose(self) -> np.ndarray:
+        """World pose (4×4) of the needle frame (arc centre)."""
+        pos, quat = p.getBasePositionAndOrientation(self.id, physicsClientId=self.client)
+        return _pose(pos, quat) @ invert(self._T_needle_com)
+
+    def set_pose(self, T_world_needle: np.ndarray) -> None:
+        """Teleport the needle (velocity zeroed); a held or frozen needle keeps its constraint."""
+        T = np.asarray(T_world_needle) @ self._T_needle_com
+        p.resetBasePositionAndOrientation(
+            self.id, list(T[:3, 3]), list(quat_xyzw(T[:3, :3])), physicsClientId=self.client
+        )
+        p.resetBaseVelocity(self.id, [0, 0, 0], [0, 0, 0], physicsClientId=self.client)
+        if self._frozen and self._constraint is not None:
+            self._fix_to_world(np.asarray(T_world_needle))
+
+    def velocity(self) -> tuple[np.ndarray, np.ndarray]:
+        """Linear (m/s) and angular (rad/s) velocity of the needle body."""
+        v, w = p.getBaseVelocity(self.id, physicsClientId=self.client)
+        return np.array(v), np.array(w)
+
+    def is_resting(self, lin_tol: float = 1e-3, ang_tol: float = 0.05) -> bool:
+        """True when the needle is (nearly) motionless."""
+        v, w = self.velocity()
+        return bool(np.linalg.norm(v) < lin_tol and np.linalg.norm(w) < ang_tol)
+
+    # --- state ------------------------------------------------------------------------------
+    @property
+    def held_by(self) -> tuple[int, int] | None:
+        """(body id, link index) of the holder, or None."""
+        return self._held_by
+
+    @property
+    def T_link_needle(self) -> np.ndarray | None:
+        """In-hand pose of the needle in the holding link's frame (None when not held)."""
+        return None if self._T_link_needle is None else self._T_link_needle.copy()
+
+    @property
+    def frozen(self) -> bool:
+        return self._frozen
+
+    @property
+    def state(self) -> str:
+        """ "held", "frozen" or "free"."""
+        return "held" if self._held_by else ("frozen" if self._frozen else "free")
+
+    # --- collisions -------------------------------------------------------------------------
+    def add_tissue(self, body_id: int) -> None:
+        """Declare a body the needle passes through while held or frozen (e.g. the phantom)."""
+        self._tissue.append(body_id)
+        self._set_tissue_collision(self._tissue_enabled, [body_id])
+
+    def ignore_collisions_with(self, body_id: int) -> None:
+        """Never collide with this body (e.g. the arms, which are reset kinematically)."""
+        self._filter(body_id, False)
+
+    def _filter(self, body_id: int, enable: bool) -> None:
+        n = p.getNumJoints(body_id, physicsClientId=self.client)
+        for link in range(-1, n):
+            p.setCollisionFilterPair(
+                self.id, body_id, -1, link, int(enable), physicsClientId=self.client
+            )
+
+    def _set_tissue_collision(self, enable: bool, bodies=None) -> None:
+        for b in self._tissue if bodies is None else bodies:
+            self._filter(b, enable)
+        self._tissue_enabled = enable
+
+    def _penetrates_tissue(self) -> bool:
+        for b in self._tissue:
+            pts = p.getClosestPoints(self.id, b, 0.0, physicsClientId=self.client)
+            if any(c[8] < -1e-5 for c in pts):
+                return True
+        return False
+
+    def update(self) -> None:
+        """Call once per physics step: re-enables tissue contact once a free needle is clear."""
+        if self._pending_tissue and self.state == "free" and not self._penetrates_tissue():
+            self._set_tissue_collision(True)
+            self._pending_tissue = False
+
+    def _release_collisions(self) -> None:
+        """After a release: collide with tissue again now, or once the needle is clear of it."""
+        self._set_tissue_collision(True)
+        if self._penetrates_tissue():
+            self._set_tissue_collision(False)
+            self._pending_tissue = True
+        else:
+            self._pending_tissue = False
+
+    # --- constraints ------------------------------------------------------------------------
+    def _remove_constraint(self) -> None:
+        if self._constraint is not None:
+            p.removeConstraint(self._constraint, physicsClientId=self.client)
+            self._constraint = None
+
+    def _link_pose(self, body: int, link: int) -> np.ndarray:
+        """World pose of a link frame (URDF link frame, not its inertial frame)."""
+        if link < 0:
+            pos, quat = p.getBasePositionAndOrientation(body, physicsClientId=self.client)
+            return _pose(pos, quat) @ invert(self._inertial_offset(body, link))
+        s = p.getLinkState(body, link, computeForwardKinematics=True, physicsClientId=self.client)
+        return _pose(s[4], s[5])
+
+    def _inertial_offset(self, body: int, link: int) -> np.ndarray:
+        """Pose of a link's inertial (COM) frame in its link frame."""
+        info = p.getDynamicsInfo(body, link, physicsClientId=self.client)
+        return _pose(info[3], info[4])
+
+    def attach(self, parent_body: int, parent_link: int, T_link_needle: np.ndarray) -> None:
+        """Hold the needle rigidly at ``T_link_needle`` in the parent link's frame."""
+        T_link_needle = np.asarray(T_link_needle, dtype=float)
+        if T_link_needle.shape != (4, 4):
+            raise ValueError(f"T_link_needle must be 4×4, got shape {T_link_needle.shape}")
+        self._remove_constraint()
+        self._frozen = False
+        self._set_tissue_collision(False)
+        self._pending_tissue = False
+        self.set_pose(self._link_pose(parent_body, parent_link) @ T_link_needle)
+        # Constraint frames are given in the parent's and child's inertial (COM) frames.
+        T_pcom_ccom = (
+            invert(self._inertial_offset(parent_body, parent_link))
+            @ T_link_needle
+            @ self._T_needle_com
+        )
+        self._constraint = p.createConstraint(
+            parentBodyUniqueId=parent_body,
+            parentLinkIndex=parent_link,
+            childBodyUniqueId=self.id,
+            childLinkIndex=-1,
+            jointType=p.JOINT_FIXED,
+            jointAxis=[0, 0, 0],
+            parentFramePosition=list(T_pcom_ccom[:3, 3]),
+            parentFrameOrientation=list(quat_xyzw(T_pcom_ccom[:3, :3])),
+            childFramePosition=[0, 0, 0],
+            childFrameOrientation=[0, 0, 0, 1],
+            physicsClientId=self.client,
+        )
+        p.changeConstraint(self._constraint, maxForce=HOLD_FORCE, physicsClientId=self.client)
+        self._held_by = (parent_body, parent_link)
+        self._T_link_needle = T_link_needle.copy()
+
+    def detach(self) -> None:
+        """Let go: the needle becomes free (falls) unless the caller freezes it."""
+        if self._held_by is None:
+            return
+        self._remove_constraint()
+        self._held_by = None
+        self._T_link_needle = None
+        self._release_collisions()
+
+    def sync_to_holder(self) -> None:
+        """Snap a held needle exactly onto its holder (removes constraint lag after a reset)."""
+        if self._held_by is not None and self._T_link_needle is not None:
+            body, link = self._held_by
+            T = self._link_pose(body, link) @ self._T_link_needle
+            Tc = T @ self._T_needle_com
+            p.resetBasePositionAndOrientation(
+                self.id, list(Tc[:3, 3]), list(quat_xyzw(Tc[:3, :3])), physicsClientId=self.client
+            )
+
+    def _fix_to_world(self, T_world_needle: np.ndarray) -> None:
+        self._remove_constraint()
+        Tc = T_world_needle @ self._T_needle_com
+        self._constraint = p.createConstraint(
+            parentBodyUniqueId=self.id,
+            parentLinkIndex=-1,
+            childBodyUniqueId=-1,
+            childLinkIndex=-1,
+            jointType=p.JOINT_FIXED,
+            jointAxis=[0, 0, 0],
+            parentFramePosition=[0, 0, 0],
+            parentFrameOrientation=[0, 0, 0, 1],
+            childFramePosition=list(Tc[:3, 3]),
+            childFrameOrientation=list(quat_xyzw(Tc[:3, :3])),
+            physicsClientId=self.client,
+        )
+        p.changeConstraint(self._constraint, maxForce=HOLD_FORCE, physicsClientId=self.client)
+
+    def freeze(self, T_world_needle: np.ndarray | None = None) -> None:
+        """The tissue holds the needle where it is (or at ``T_world_needle``); drops any holder."""
+        T = self.pose() if T_world_needle is None else np.asarray(T_world_needle, dtype=float)
+        self._remove_constraint()
+        self._held_by = None
+        self._T_link_needle = None
+        self._set_tissue_collision(False)
+        self._pending_tissue = False
+        self._frozen = True
+        self.set_pose(T)
+        self._fix_to_world(T)
+
+    def unfreeze(self) -> None:
+        """The tissue lets go (the needle is free again)."""
+        if not self._frozen:
+            return
+        self._remove_constraint()
+        self._frozen = False
+        self._release_collisions()

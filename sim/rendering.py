@@ -1,0 +1,71 @@
+"""Per-client renderer choice: the EGL plugin when it loads, TinyRenderer otherwise.
+
+EGL (software Mesa on a CPU) is 2-4× faster than TinyRenderer and follows the pixel-centre
+convention exactly; it renders at most 1024×768 internally (DESIGN.md §5), so callers render
+larger images in tiles (see :mod:`suture_bt.sim.camera`). Bodies created in a client before
+the plugin is loaded are never drawn by it: call :func:`load_renderer` right after connecting
+(the needle and phantom bodies do so themselves).
+"""
+
+from __future__ import annotations
+
+import contextlib
+import os
+import pkgutil
+import sys
+
+import pybullet as p
+
+#: Largest image the EGL plugin renders without upsampling (DESIGN.md §5).
+MAX_TILE_WIDTH = 1024
+MAX_TILE_HEIGHT = 768
+
+_egl_broken = False
+
+
+@contextlib.contextmanager
+def _quiet_stdout():
+    """Silence the plugin's C-level banner on file descriptor 1."""
+    try:
+        sys.stdout.flush()
+        saved = os.dup(1)
+    except (OSError, ValueError):
+        yield
+        return
+    devnull = os.open(os.devnull, os.O_WRONLY)
+    try:
+        os.dup2(devnull, 1)
+        yield
+    finally:
+        os.dup2(saved, 1)
+        os.close(saved)
+        os.close(devnull)
+
+
+def load_renderer(client: int) -> str:
+    """Load the EGL plugin into ``client`` (a no-op when loaded); return "egl" or "tiny".
+
+    pybullet returns the existing plugin when asked again, so this is cheap and stays right
+    when a client id is reused after a disconnect. ``SUTURE_BT_RENDERER=tiny`` skips EGL.
+    """
+    global _egl_broken
+    if not p.isConnected(physicsClientId=client):
+        raise ValueError(f"pybullet client {client} is not connected")
+    if _egl_broken or os.environ.get("SUTURE_BT_RENDERER", "").lower() == "tiny":
+        return "tiny"
+    spec = pkgutil.get_loader("eglRenderer")
+    if spec is None:
+        _egl_broken = True
+        return "tiny"
+    with _quiet_stdout():
+        plugin = p.loadPlugin(spec.get_filename(), "_eglRendererPlugin", physicsClientId=client)
+    if plugin < 0:
+        _egl_broken = True
+        return "tiny"
+    return "egl"
+
+
+def renderer_flag(client: int) -> int:
+    """The ``renderer=`` value for ``getCameraImage`` on this client."""
+    kind = load_renderer(client)
+    return p.ER_BULLET_HARDWARE_OPENGL if kind == "egl" else p.ER_TINY_RENDERER
