@@ -20,12 +20,16 @@ import pybullet as pb
 
 from suture_bt.geometry import NeedleModel, PhantomModel
 from suture_bt.kinematics import forward_kinematics
+from suture_bt.kinematics.psm import JAW_CLOSED_THRESHOLD
+from suture_bt.sim.camera import StereoEndoscope
 from suture_bt.sim.joint_offsets import JointOffset
 from suture_bt.sim.joint_servo import JointServo, ServoParams
-from suture_bt.sim.psm_body import PSMBody
+from suture_bt.sim.needle_body import NeedleBody
+from suture_bt.sim.psm_body import LINK_TIP, PSMBody
+from suture_bt.sim.rendering import load_renderer
 from suture_bt.sim.scene import SceneConfig, default_scene
 from suture_bt.sim.simulated_psm import SimulatedPSM
-from suture_bt.transforms import pose_to_transform
+from suture_bt.transforms import make_transform, pose_to_transform
 
 #: SRC base (RCM) poses of the two arms in the world (DESIGN.md §5).
 PSM_BASE_POSES = {
@@ -33,6 +37,12 @@ PSM_BASE_POSES = {
     "psm2": ((-0.100, 0.1346, 0.1350), (0.6981, 0.5236, -np.pi)),
 }
 GRAVITY = (0.0, 0.0, -9.81)
+#: SRC initial needle pose, resting on the tissue, in the phantom frame (DESIGN.md §5).
+SRC_NEEDLE_REST_POSITION = (-0.0208, 0.0562, 0.0717)
+#: Where a held wire sits behind the tip control point, along −tip z (inside the blades).
+GRASP_DEPTH = 0.0015
+#: Jaw angle at which the blades touch a 0.72 mm wire held GRASP_DEPTH behind the tip.
+JAW_ON_NEEDLE = 0.08
 
 
 def psm_base_frame(arm: str) -> np.ndarray:
@@ -71,9 +81,12 @@ class _Periodic:
 class World:
     """The whole simulated scene; build it with :meth:`from_scene`."""
 
-    def __init__(self, scene: SceneConfig | None = None):
+    def __init__(self, scene: SceneConfig | None = None, with_camera: bool = True):
         self.scene = scene or default_scene()
         self.client = pb.connect(pb.DIRECT)
+        if with_camera:
+            # Bodies created before the EGL plugin loads are never drawn by it.
+            load_renderer(self.client)
         self.dt = 1.0 / self.scene.physics_rate_hz
         self.clock = SimClock(self.dt)
         pb.setGravity(*GRAVITY, physicsClientId=self.client)
@@ -102,19 +115,84 @@ class World:
             self.arms[arm] = SimulatedPSM(arm, body, servo, offset, self.clock)
         self.psm1 = self.arms["psm1"]
         self.psm2 = self.arms["psm2"]
-        self.camera = None
-        self.needle = None
+        self.camera: StereoEndoscope | None = None
+        self.needle: NeedleBody | None = None
         self.phantom = None
-        self._build_task_bodies()
+        self.needle_holder: str | None = None
+        self._jaw_was_closed = {
+            a: arm.jaw.measured_jp()[0] <= JAW_CLOSED_THRESHOLD for a, arm in self.arms.items()
+        }
+        self._build_task_bodies(with_camera)
 
     @classmethod
-    def from_scene(cls, scene: SceneConfig | None = None) -> World:
-        """A world built from a scene (``None``: the embedded SRC scene)."""
-        return cls(scene)
+    def from_scene(cls, scene: SceneConfig | None = None, with_camera: bool = True) -> World:
+        """A world built from a scene (``None``: the embedded SRC scene).
 
-    # ------------------------------------------------------------------ B's parts
-    def _build_task_bodies(self) -> None:
-        """Phantom, needle and endoscope, when their modules exist."""
+        ``with_camera=False`` skips the endoscope (and the EGL plugin), for fast headless tests.
+        """
+        return cls(scene, with_camera)
+
+    # ------------------------------------------------------------------ task bodies
+    def _build_task_bodies(self, with_camera: bool) -> None:
+        """Phantom, needle and endoscope."""
+        cam = self.scene.camera
+        if with_camera:
+            self.camera = StereoEndoscope(
+                self.client,
+                cam.width,
+                cam.height,
+                cam.noise_std,
+                cam.brightness,
+                rng=np.random.default_rng([self.scene.seed, 11]),
+            )
+            self.camera.set_clock(self.clock.now)
+        tissue_ids: tuple[int, ...] = ()
+        T_needle = self._needle_start_pose()
+        self.needle = NeedleBody(self.client, self.task.needle, T_needle, tissue_ids)
+        for arm in self.arms.values():
+            self.needle.ignore_collisions_with(arm.body.body)
+        if self.scene.needle.start == "in_psm2_jaw":
+            self.psm2.jaw.servo_jp(0.0)
+            self._attach("psm2", self.in_jaw_grasp_pose())
+        elif self.phantom is None:
+            # No tissue body to rest on yet: the tissue holds the needle where it starts.
+            self.needle.freeze(T_needle)
+
+    def _needle_start_pose(self) -> np.ndarray:
+        """World pose of the needle at start, per the scene."""
+        nd = self.scene.needle
+        if nd.start == "pose":
+            return nd.T_world_needle
+        if nd.start == "resting":
+            return self.task.phantom.T_world_phantom @ pose_to_transform(
+                SRC_NEEDLE_REST_POSITION, (0.0, 0.0, 0.0)
+            )
+        return self.psm2.body.tip_pose() @ self.in_jaw_grasp_pose()
+
+    def in_jaw_grasp_pose(self) -> np.ndarray:
+        """Needle pose in the tip frame for a grasp at the scene's arc angle.
+
+        The jaws are orthogonal to the needle plane (needle z = tip z), the wire runs along the
+        tip x axis between the blades (which close along tip y), ``GRASP_DEPTH`` behind the tip.
+        """
+        a = np.deg2rad(self.scene.needle.grasp_arc_angle_deg)
+        tangent = np.array([np.sin(a), -np.cos(a), 0.0])
+        radial = np.array([np.cos(a), np.sin(a), 0.0])
+        R = np.stack([tangent, radial, [0.0, 0.0, 1.0]])  # rows: needle axes -> tip axes
+        grasp_point = np.array([0.0, 0.0, -GRASP_DEPTH])
+        return make_transform(R, grasp_point - R @ self.task.needle.point_at(a))
+
+    def _attach(self, arm: str, T_tip_needle: np.ndarray) -> None:
+        """Hold the needle rigidly in ``arm``'s jaw at ``T_tip_needle`` (tip frame)."""
+        self.needle.attach(self.arms[arm].body.body, LINK_TIP, T_tip_needle)
+        self.needle_holder = arm
+        self.arms[arm].jaw.min_angle = JAW_ON_NEEDLE
+
+    def _release(self) -> None:
+        if self.needle_holder is not None:
+            self.arms[self.needle_holder].jaw.min_angle = 0.0
+        self.needle_holder = None
+        self.needle.detach()
 
     # ------------------------------------------------------------------ time
     def add_periodic(self, period: float, callback: Callable[[float], None]) -> object:
@@ -168,10 +246,28 @@ class World:
         self._after_physics(t)
 
     def _grasp_and_release(self) -> None:
-        """Grasp on jaw closing / release on opening (needs the needle)."""
+        """Release when the holding jaw opens; try a grasp when a jaw closes."""
+        if self.needle is None:
+            return
+        for name, arm in self.arms.items():
+            closed = arm.jaw.measured_jp()[0] <= JAW_CLOSED_THRESHOLD
+            if name == self.needle_holder and arm.jaw.setpoint_jp()[0] > JAW_ON_NEEDLE:
+                self._release()
+            elif closed and not self._jaw_was_closed[name] and self.needle_holder is None:
+                grasp = self._grasp_check(name)
+                if grasp is not None:
+                    self._attach(name, grasp)
+            self._jaw_was_closed[name] = closed
+
+    def _grasp_check(self, arm: str) -> np.ndarray | None:
+        """In-hand pose (tip frame) when the needle wire lies between the jaws, else None."""
+        return None
 
     def _after_physics(self, t: float) -> None:
         """Held needle follows its jaw; the phantom records crossings and strain."""
+        if self.needle is not None:
+            self.needle.sync_to_holder()
+            self.needle.update()
 
     # ------------------------------------------------------------------ helpers
     def true_tip_pose(self, arm: str) -> np.ndarray:
