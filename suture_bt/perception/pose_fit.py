@@ -1,0 +1,404 @@
+"""Stereo needle-pose fit: the seed's parameterisation, an unbiased edge objective, batched LM.
+
+Objective (one-sided, mask → model, so occluded parts of the needle cost nothing): every mask
+edge point (midpoint between a needle pixel and a 4-neighbour background pixel) back-projects
+to a ray that should be tangent to the wire. The wire is the union of spheres of the wire
+radius along the centre-line arc, so a ray is tangent exactly when its distance to the arc is
+the wire radius; the residual is that distance minus the radius, in pixels at the point's
+depth. Rays past either end measure to the end point, which is the hemispherical cap. Unlike a
+chamfer to the centre-line this has no pull along the line of sight (DESIGN.md §5).
+Minimised by Levenberg-Marquardt with Cauchy weights, vectorised over many starts (the
+tilt-mirror ambiguity), on the parameters of :mod:`needle_projection`.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from suture_bt.geometry import NeedleModel
+from suture_bt.interfaces import StereoCameraModel
+from suture_bt.perception.needle_projection import (
+    params_to_pose,
+    phi_from_base_depth,
+    pixel_rays,
+    pose_to_params,
+    project_cam,
+    transform_points,
+)
+from suture_bt.transforms import invert
+
+#: Finite-difference steps of the six parameters (px, px, px, px, rad, rad).
+FD_STEPS = np.array([0.02, 0.02, 0.02, 0.02, 2e-5, 2e-4])
+#: Samples of the arc angle for the nearest-point search before Newton polishing.
+N_THETA_GRID = 24
+
+
+class NeedleNotFound(Exception):
+    """The needle is not visible enough to estimate its pose; ``reason`` says why."""
+
+    def __init__(self, reason: str) -> None:
+        super().__init__(reason)
+        self.reason = reason
+
+
+@dataclass(frozen=True)
+class MaskView:
+    """A needle mask (bool) of one eye, possibly a crop whose top-left pixel is ``origin``."""
+
+    mask: np.ndarray
+    origin: tuple[int, int] = (0, 0)
+
+
+def edge_points(view: MaskView) -> np.ndarray:
+    """Sub-pixel edge points (N, 2) in full-image (u, v): midpoints of in/out 4-neighbour pairs."""
+    m = np.asarray(view.mask, bool)
+    x0, y0 = view.origin
+    pts = []
+    dh = m[:, 1:] != m[:, :-1]
+    v, u = np.nonzero(dh)
+    pts.append(np.stack([u + 0.5, v.astype(float)], 1))
+    dv = m[1:, :] != m[:-1, :]
+    v, u = np.nonzero(dv)
+    pts.append(np.stack([u.astype(float), v + 0.5], 1))
+    out = np.concatenate(pts, 0)
+    return out + np.array([x0, y0], float)
+
+
+@dataclass
+class EdgeRays:
+    """Edge rays of both eyes in the left camera frame, with their pixel scale data."""
+
+    origins: np.ndarray  # (N, 3)
+    dirs: np.ndarray  # (N, 3) unit
+    dz: np.ndarray  # (N,) z of the direction in its own eye frame
+    focal: np.ndarray  # (N,) focal length of its eye (px)
+    eye: np.ndarray  # (N,) 0 left, 1 right
+
+    def subset(self, idx: np.ndarray) -> EdgeRays:
+        return EdgeRays(
+            self.origins[idx], self.dirs[idx], self.dz[idx], self.focal[idx], self.eye[idx]
+        )
+
+    def __len__(self) -> int:
+        return len(self.dz)
+
+
+def edge_rays(stereo: StereoCameraModel, left_uv: np.ndarray, right_uv: np.ndarray) -> EdgeRays:
+    """Rays through left/right edge pixels, expressed in the left camera frame."""
+    T_left_right = invert(stereo.left.T_world_cam) @ stereo.right.T_world_cam
+    dl = pixel_rays(stereo.left, left_uv) if len(left_uv) else np.zeros((0, 3))
+    dr = pixel_rays(stereo.right, right_uv) if len(right_uv) else np.zeros((0, 3))
+    dirs = np.concatenate([dl, dr @ T_left_right[:3, :3].T], 0)
+    origins = np.concatenate(
+        [np.zeros((len(dl), 3)), np.broadcast_to(T_left_right[:3, 3], (len(dr), 3))], 0
+    )
+    dz = np.concatenate([dl[:, 2], dr[:, 2]])
+    focal = np.concatenate([np.full(len(dl), stereo.left.fx), np.full(len(dr), stereo.right.fx)])
+    eye = np.concatenate([np.zeros(len(dl), int), np.ones(len(dr), int)])
+    return EdgeRays(origins, dirs, dz, focal, eye)
+
+
+def _to_needle(T: np.ndarray, rays: EdgeRays) -> tuple[np.ndarray, np.ndarray]:
+    """Ray origins and directions in each pose's needle frame: (K, N, 3) each."""
+    R, p = T[:, :3, :3], T[:, :3, 3]
+    o = np.matmul(rays.origins[None] - p[:, None], R)
+    d = np.matmul(rays.dirs[None], R)
+    return o, d
+
+
+def _arc_f(theta, o, d, r):
+    """Squared distance f from the arc point at theta to each ray's line, and its along-ray t."""
+    a, b = r * np.cos(theta) - o[..., 0], r * np.sin(theta) - o[..., 1]
+    qd = a * d[..., 0] + b * d[..., 1] - o[..., 2] * d[..., 2]
+    return a * a + b * b + o[..., 2] ** 2 - qd * qd, qd
+
+
+def _arc_terms(theta, o, d, r):
+    """Squared ray-to-point distance f and its first two derivatives in theta."""
+    c, s = np.cos(theta), np.sin(theta)
+    a, b = r * c - o[..., 0], r * s - o[..., 1]
+    qd = a * d[..., 0] + b * d[..., 1] - o[..., 2] * d[..., 2]
+    f = a * a + b * b + o[..., 2] ** 2 - qd * qd
+    ap, bp = -r * s, r * c
+    qdp = ap * d[..., 0] + bp * d[..., 1]
+    fp = 2 * (a * ap + b * bp) - 2 * qd * qdp
+    app, bpp = -r * c, -r * s
+    qdpp = app * d[..., 0] + bpp * d[..., 1]
+    fpp = 2 * (ap * ap + bp * bp + a * app + b * bpp) - 2 * (qdp * qdp + qd * qdpp)
+    return f, fp, fpp, qd
+
+
+def nearest_arc_angle(
+    o: np.ndarray,
+    d: np.ndarray,
+    model: NeedleModel,
+    grid: int = N_THETA_GRID,
+    start: np.ndarray | None = None,
+):
+    """Arc angle (K, N) of the centre-line point nearest each ray (clamped to the arc's ends).
+
+    A grid search then Newton steps; with ``start`` (angles of a nearby pose) Newton only.
+    """
+    lo, hi = model.tip_angle, model.base_angle
+    if start is None:
+        g = np.linspace(lo, hi, grid)
+        f, _ = _arc_f(g[None, None, :], o[..., None, :], d[..., None, :], model.radius)
+        theta = g[np.argmin(f, -1)]
+    else:
+        theta = start
+    for _ in range(2):
+        _, fp, fpp, _ = _arc_terms(theta, o, d, model.radius)
+        step = np.where(fpp > 0, fp / np.where(fpp > 0, fpp, 1.0), 0.0)
+        step = np.clip(step, -(hi - lo) / grid, (hi - lo) / grid)
+        theta = np.clip(theta - step, lo, hi)
+    return theta
+
+
+def residuals(
+    T: np.ndarray,
+    rays: EdgeRays,
+    model: NeedleModel,
+    theta: np.ndarray | None = None,
+    theta_start: np.ndarray | None = None,
+):
+    """Edge residuals (K, N) in pixels for poses T (K, 4, 4); also the arc angles used.
+
+    ``theta`` fixes the nearest-point angles (for finite differences); ``theta_start`` seeds
+    their Newton search from a nearby pose's angles.
+    """
+    o, d = _to_needle(T, rays)
+    if theta is None:
+        theta = nearest_arc_angle(o, d, model, start=theta_start)
+    f, qd = _arc_f(theta, o, d, model.radius)
+    dist = np.sqrt(np.maximum(f, 0.0))
+    depth = qd * rays.dz[None]
+    r = (dist - model.wire_radius) * rays.focal[None] / np.where(depth > 1e-6, depth, np.nan)
+    return r, theta
+
+
+def cauchy_cost(r: np.ndarray, sigma: float) -> np.ndarray:
+    """Mean Cauchy loss per start (inf where any residual is undefined)."""
+    c = 0.5 * sigma**2 * np.log1p((r / sigma) ** 2)
+    out = c.mean(-1)
+    return np.where(np.isfinite(out), out, np.inf)
+
+
+def levenberg_marquardt(
+    x: np.ndarray,
+    rays: EdgeRays,
+    stereo: StereoCameraModel,
+    model: NeedleModel,
+    iters: int,
+    sigma: float,
+) -> tuple[np.ndarray, np.ndarray]:
+    """Batched robust LM over starts x (K, 6); returns (x, cost)."""
+    x = np.array(x, dtype=float)
+    cam = stereo.left
+    r, theta = residuals(params_to_pose(x, cam, model), rays, model)
+    cost = cauchy_cost(r, sigma)
+    lam = np.full(len(x), 1e-2)
+    for _ in range(iters):
+        ok = np.isfinite(cost)
+        if not ok.any():
+            break
+        w = 1.0 / (1.0 + (r / sigma) ** 2)
+        w = np.where(np.isfinite(w), w, 0.0)
+        rr = np.where(np.isfinite(r), r, 0.0)
+        xs = x[:, None, :] + np.diag(FD_STEPS)[None]
+        rp, _ = residuals(
+            params_to_pose(xs.reshape(-1, 6), cam, model).reshape(-1, 4, 4),
+            rays,
+            model,
+            np.repeat(theta, 6, 0),
+        )
+        J = (rp.reshape(len(x), 6, -1) - rr[:, None]) / FD_STEPS[None, :, None]  # (K, 6, N)
+        J = np.where(np.isfinite(J), J, 0.0)
+        Jw = J * w[:, None, :]
+        A = Jw @ J.transpose(0, 2, 1)
+        g = (Jw @ rr[..., None])[..., 0]
+        diag = np.einsum("kii->ki", A) + 1e-9
+        Ad = A + lam[:, None, None] * np.einsum("ki,ij->kij", diag, np.eye(6))
+        try:
+            delta = -np.linalg.solve(Ad, g[..., None])[..., 0]
+        except np.linalg.LinAlgError:
+            break
+        xn = x + delta
+        rn, thn = residuals(params_to_pose(xn, cam, model), rays, model, theta_start=theta)
+        cn = cauchy_cost(rn, sigma)
+        better = cn < cost
+        x[better], r[better], theta[better], cost[better] = (
+            xn[better],
+            rn[better],
+            thn[better],
+            cn[better],
+        )
+        lam = np.where(better, lam / 3.0, lam * 4.0)
+        lam = np.clip(lam, 1e-7, 1e7)
+    return x, cost
+
+
+@dataclass(frozen=True)
+class PoseFitResult:
+    """A fitted needle pose with its evidence.
+
+    ``rms_px`` is the RMS edge residual of inliers; ``inlier_fraction`` the share of edge points
+    within 1.5 px of the model outline; ``ambiguity`` the cost of the best clearly different
+    solution minus the chosen one's (small: tilt-mirror not resolved).
+    """
+
+    T_cam_needle: np.ndarray
+    T_world_needle: np.ndarray
+    params: np.ndarray
+    cost: float
+    rms_px: float
+    inlier_fraction: float
+    n_edge_points: tuple[int, int]
+    ambiguity: float
+    candidates: list = field(default_factory=list, repr=False)
+
+
+def _rot_angle(Ra: np.ndarray, Rb: np.ndarray) -> float:
+    c = (np.trace(Ra.T @ Rb) - 1.0) / 2.0
+    return float(np.arccos(np.clip(c, -1.0, 1.0)))
+
+
+@dataclass
+class PoseFitter:
+    """Multi-start stereo fit of the needle pose to two masks (see module docstring)."""
+
+    stereo: StereoCameraModel
+    model: NeedleModel = field(default_factory=NeedleModel)
+    n_psi: int = 12
+    max_points_per_eye: int = 1200
+    coarse_points_per_eye: int = 60
+    mid_points_per_eye: int = 200
+    n_keep: int = 6
+    min_edge_points: int = 12
+    seed: int = 0
+
+    def fit(
+        self,
+        left: MaskView,
+        right: MaskView,
+        endpoints_left: tuple[np.ndarray, np.ndarray] | None = None,
+        depth_hint: float | None = None,
+        warm_start: np.ndarray | None = None,
+    ) -> PoseFitResult:
+        """Fit; ``endpoints_left`` = (base uv, tip uv) in the left image; raise NeedleNotFound."""
+        rng = np.random.default_rng(self.seed)
+        el, er = edge_points(left), edge_points(right)
+        if len(el) < self.min_edge_points or len(er) < self.min_edge_points:
+            raise NeedleNotFound(
+                f"too few needle edge points (left {len(el)}, right {len(er)}, "
+                f"need {self.min_edge_points} each)"
+            )
+        el = _subsample(el, self.max_points_per_eye, rng)
+        er = _subsample(er, self.max_points_per_eye, rng)
+        rays = edge_rays(self.stereo, el, er)
+        nl = len(el)
+        coarse = rays.subset(_balanced(nl, len(er), self.coarse_points_per_eye, rng))
+        mid = rays.subset(_balanced(nl, len(er), self.mid_points_per_eye, rng))
+        cam = self.stereo.left
+        if endpoints_left is None and warm_start is not None:
+            ends = transform_points(
+                np.asarray(warm_start), np.stack([self.model.base, self.model.tip])
+            )
+            endpoints_left = tuple(project_cam(cam, ends))
+        elif endpoints_left is None:
+            endpoints_left = _farthest_pair(el, rng)
+        ub, ut = (np.asarray(e, float) for e in endpoints_left)
+        starts = self._starts(ub, ut, depth_hint)
+        if warm_start is not None:
+            starts = np.concatenate(
+                [starts, pose_to_params(np.asarray(warm_start)[None], cam, self.model)]
+            )
+        r0, _ = residuals(params_to_pose(starts, cam, self.model), coarse, self.model)
+        c0 = cauchy_cost(r0, 3.0)
+        order = np.argsort(c0)[: self.n_keep * 3]
+        keep = [i for i in order if np.isfinite(c0[i])][: self.n_keep]
+        if warm_start is not None and len(starts) - 1 not in keep:
+            keep.append(len(starts) - 1)
+        if not keep:
+            raise NeedleNotFound("no feasible pose hypothesis from the needle's end points")
+        x, _ = levenberg_marquardt(starts[keep], mid, self.stereo, self.model, 10, 3.0)
+        x, c = levenberg_marquardt(x, mid, self.stereo, self.model, 10, 1.0)
+        order = np.argsort(c)
+        T_mid = params_to_pose(x[order], cam, self.model)
+        finals = [order[0]]
+        for j, k in enumerate(order[1:], 1):
+            if np.isfinite(c[k]) and _rot_angle(T_mid[0, :3, :3], T_mid[j, :3, :3]) > np.deg2rad(
+                10
+            ):
+                finals.append(k)
+                break
+        xf, cf = levenberg_marquardt(x[finals], rays, self.stereo, self.model, 8, 1.0)
+        if not np.isfinite(cf).any():
+            raise NeedleNotFound("pose fit diverged")
+        b = int(np.argmin(cf))
+        T = params_to_pose(xf[b], cam, self.model)
+        r, _ = residuals(T[None], rays, self.model)
+        r = r[0]
+        inl = np.abs(r) < 1.5
+        rms = float(np.sqrt(np.mean(r[inl] ** 2))) if inl.any() else float("inf")
+        amb = float(cf[1 - b] - cf[b]) if len(cf) == 2 else float("inf")
+        return PoseFitResult(
+            T_cam_needle=T,
+            T_world_needle=cam.T_world_cam @ T,
+            params=xf[b],
+            cost=float(cf[b]),
+            rms_px=rms,
+            inlier_fraction=float(inl.mean()),
+            n_edge_points=(len(el), len(er)),
+            ambiguity=amb,
+            candidates=[params_to_pose(xx, cam, self.model) for xx in xf],
+        )
+
+    def _starts(self, ub: np.ndarray, ut: np.ndarray, depth_hint: float | None) -> np.ndarray:
+        """Start parameters over depths × both chord roots × psi."""
+        if depth_hint is not None and np.isfinite(depth_hint) and depth_hint > 0:
+            depths = depth_hint * np.array([0.8, 0.9, 1.0, 1.1, 1.25])
+        else:
+            depths = np.geomspace(0.05, 0.3, 12)
+        phis = phi_from_base_depth(
+            np.broadcast_to(ub, (len(depths), 2)),
+            np.broadcast_to(ut, (len(depths), 2)),
+            depths,
+            self.stereo.left,
+            self.model,
+        ).ravel()
+        phis = np.unique(np.round(phis, 6))
+        psis = np.linspace(-np.pi, np.pi, self.n_psi, endpoint=False) + np.pi / self.n_psi
+        P, S = np.meshgrid(phis, psis, indexing="ij")
+        n = P.size
+        return np.concatenate(
+            [
+                np.broadcast_to(ub, (n, 2)),
+                np.broadcast_to(ut, (n, 2)),
+                P.reshape(-1, 1),
+                S.reshape(-1, 1),
+            ],
+            1,
+        )
+
+
+def _subsample(pts: np.ndarray, n: int, rng: np.random.Generator) -> np.ndarray:
+    if len(pts) <= n:
+        return pts
+    return pts[np.sort(rng.choice(len(pts), n, replace=False))]
+
+
+def _balanced(nl: int, nr: int, n: int, rng: np.random.Generator) -> np.ndarray:
+    """Indices of up to n points from each eye (left first in the ray arrays)."""
+    a = np.sort(rng.choice(nl, min(n, nl), replace=False))
+    b = nl + np.sort(rng.choice(nr, min(n, nr), replace=False))
+    return np.concatenate([a, b])
+
+
+def _farthest_pair(pts: np.ndarray, rng: np.random.Generator) -> tuple[np.ndarray, np.ndarray]:
+    """The two mutually farthest edge points: the arc's ends (identity unknown)."""
+    p = _subsample(pts, 400, rng)
+    d = np.sum((p[:, None] - p[None]) ** 2, -1)
+    i, j = np.unravel_index(np.argmax(d), d.shape)
+    return p[i], p[j]
