@@ -1,0 +1,1 @@
+"""Training-data generation from the simulator (front door: may import suture_bt.sim)."""
