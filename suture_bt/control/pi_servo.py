@@ -3,7 +3,8 @@
 The low-level joint servo of each arm leaves a steady-state error (load, friction, limited
 bandwidth; DESIGN.md §5). This loop runs at a fixed simulated rate as a world periodic
 callback (``world.add_periodic(1 / rate, servo.update)``), reads ``measured_jp``, and sends
-``servo_jp`` = desired + PI correction, so the integrator removes the steady-state error.
+``servo_jp`` = desired + correction, where the correction is a PI term on the joint error plus
+a velocity feed-forward of the low-level lag; the integrator removes the steady-state error.
 
 With an offset estimate Δq̂ (joints 1-3) the loop works on TRUE joints: it compares the desired
 q_d with q̂ = q_meas + Δq̂ and sends (q_d + correction) − Δq̂; see
@@ -42,30 +43,45 @@ def _per_joint(value, name: str) -> np.ndarray:
     return v
 
 
+#: The low-level servo's Kd/Kp = 2ζ/ω (critically damped, 6 Hz bandwidth; DESIGN.md §5 servo).
+LOW_LEVEL_LAG = 2.0 / (2.0 * np.pi * 6.0)
+
+
 @dataclass(frozen=True)
 class PIGains:
-    """Per-joint gains (SI units; kp dimensionless, ki in 1/s) and output bounds.
+    """Per-joint gains (kp dimensionless, ki in 1/s), output bounds and velocity feed-forward.
 
-    Why these defaults: the low-level servo already tracks the feed-forward q_d with a lag of a
-    few tens of ms and leaves a load-induced steady-state error; the integrator is what removes
-    that error, so ki sets how fast it goes (time constant 1/ki ≈ 0.1 s, about 3-5× slower than
-    the low-level lag, which keeps the loop well damped with the one-sample delay of a 200 Hz
-    loop). kp adds stiffness against the load during motion but is kept low because the
-    low-level lag makes a high proportional gain ring. ``max_correction`` bounds how far the
-    loop may push beyond the desired value (a few times the worst expected steady-state
-    error, 1.5° / 0.1 mm): a broken arm or a collision cannot make it drive the joint far.
+    Why these defaults (tuned with ``benchmarks/servo.py`` against the simulated low-level servo,
+    a PD loop of about 6 Hz bandwidth with Coulomb friction and load):
+
+    * ``ki = 60 /s``: the integrator is what removes the friction/load error; 60 /s settles it
+      in about 0.1 s while ki·dt = 0.3 at 200 Hz keeps the loop stable even on an ideal arm
+      that reaches its command at once (the discrete loop is stable for kp < 1 and
+      ki·dt < 2(1 − kp)).
+    * ``kp = 0.5``: adds push against a stuck joint without ringing; above 1 the loop with an
+      ideal arm would oscillate.
+    * ``velocity_feedforward = Kd/Kp`` of the low-level servo (0.053 s): a PD servo tracking a
+      ramp lags by (Kd/Kp)·q̇; feeding that forward keeps the integrator from soaking up the lag,
+      which it would otherwise release as an overshoot when the motion stops — and stiction then
+      holds the joint on the wrong side (steady-state error 10-20× larger without it).
+    * ``max_correction`` (0.15 rad, 5 mm) and ``integrator_limit`` bound how far the loop may push
+      beyond the desired value: several times the expected error (1.5°, 0.1 mm), so a blocked
+      arm cannot make it drive a joint far away.
     """
 
-    kp: np.ndarray = field(default_factory=lambda: np.full(NUM_JOINTS, 0.3))
-    ki: np.ndarray = field(default_factory=lambda: np.full(NUM_JOINTS, 10.0))
+    kp: np.ndarray = field(default_factory=lambda: np.full(NUM_JOINTS, 0.5))
+    ki: np.ndarray = field(default_factory=lambda: np.full(NUM_JOINTS, 60.0))
     max_correction: np.ndarray = field(
         default_factory=lambda: np.array([0.15, 0.15, 0.005, 0.15, 0.15, 0.15])
     )
     integrator_limit: np.ndarray = field(
         default_factory=lambda: np.array([0.15, 0.15, 0.005, 0.15, 0.15, 0.15])
     )
+    velocity_feedforward: float = LOW_LEVEL_LAG
 
     def __post_init__(self):
+        if not np.isfinite(self.velocity_feedforward) or self.velocity_feedforward < 0:
+            raise ValueError("velocity_feedforward must be a non-negative time constant (s)")
         for name in ("kp", "ki", "max_correction", "integrator_limit"):
             object.__setattr__(self, name, _per_joint(getattr(self, name), name))
 
@@ -92,6 +108,8 @@ class PIServo:
         self.joint_limits = np.asarray(joint_limits, dtype=float)
         self.offset_estimate = full_offset(offset_estimate)
         self.desired: np.ndarray | None = None
+        self._previous_desired: np.ndarray | None = None
+        self.desired_velocity = np.zeros(NUM_JOINTS)
         self.measured = np.zeros(NUM_JOINTS)
         self.estimate = np.zeros(NUM_JOINTS)
         self.error = np.zeros(NUM_JOINTS)
@@ -126,6 +144,7 @@ class PIServo:
     def reset(self, hold_current: bool = True) -> None:
         """Zero the integrator; optionally make the current estimate the desired value."""
         self.integrator[:] = 0.0
+        self._previous_desired = None
         self.desired = self.estimated_jp() if hold_current else None
 
     # -- the loop --------------------------------------------------------------------------
@@ -137,6 +156,9 @@ class PIServo:
         if self.desired is None:
             self.desired = self.estimate.copy()
         q_d = self.desired
+        prev = self._previous_desired
+        self.desired_velocity = np.zeros(NUM_JOINTS) if prev is None else (q_d - prev) / self.dt
+        self._previous_desired = q_d.copy()
         g = self.gains
         lo, hi = self.joint_limits[:, 0], self.joint_limits[:, 1]
         e = q_d - self.estimate
@@ -145,7 +167,7 @@ class PIServo:
             integ = np.clip(
                 self.integrator + g.ki * e * self.dt, -g.integrator_limit, g.integrator_limit
             )
-            raw = g.kp * e + integ
+            raw = g.kp * e + integ + g.velocity_feedforward * self.desired_velocity
             corr = np.clip(raw, -g.max_correction, g.max_correction)
             out = np.clip(q_d + corr, lo, hi)
             # Conditional integration: hold a saturated joint's integrator while the error
@@ -159,7 +181,7 @@ class PIServo:
             self.saturated = out != q_d
         self.correction = out - q_d
         self.output = out
-        self.commanded = command_for_true(out, self.offset_estimate)
+        self.commanded = np.clip(command_for_true(out, self.offset_estimate), lo, hi)
         self.arm.servo_jp(self.commanded)
         self.updates += 1
 

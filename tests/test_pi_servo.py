@@ -1,0 +1,168 @@
+"""PI servo on fake arms: removes a load error, compensates offsets, anti-windup, observability."""
+
+import numpy as np
+import pytest
+
+from suture_bt.control import PIGains, PIServo, full_offset
+from suture_bt.kinematics import JOINT_LIMITS
+
+Q0 = np.array([0.3, -0.2, 0.12, 0.5, -0.3, 0.1])
+LOAD = np.array(
+    [np.deg2rad(1.5), -np.deg2rad(1.2), 0.0001, np.deg2rad(1.5), -np.deg2rad(1.5), 0.02]
+)
+DQ_B = np.array([np.deg2rad(2.52), np.deg2rad(-0.46), 0.004])
+PHYSICS_DT = 0.001
+
+
+class LaggingArm:
+    """First-order lag (τ) toward command + Δq, pulled back by a constant load; reads q − Δq."""
+
+    def __init__(self, q0=Q0, tau=0.03, load=LOAD, offset=(0.0, 0.0, 0.0)):
+        self.offset = full_offset(offset)
+        self.q = np.array(q0, dtype=float) + self.offset
+        self.cmd = np.array(q0, dtype=float)
+        self.tau, self.load = tau, np.asarray(load, dtype=float)
+        self.blocked = np.zeros(6, dtype=bool)
+        self.commands = 0
+
+    def measured_jp(self):
+        return self.q - self.offset
+
+    def servo_jp(self, q):
+        q = np.asarray(q, dtype=float)
+        assert np.all(q >= JOINT_LIMITS[:, 0]) and np.all(q <= JOINT_LIMITS[:, 1])
+        self.cmd = q.copy()
+        self.commands += 1
+
+    def physics_step(self):
+        target = self.cmd + self.offset - self.load
+        if self.tau == 0.0:
+            new = target
+        else:
+            new = self.q + PHYSICS_DT / self.tau * (target - self.q)
+        self.q = np.where(self.blocked, self.q, new)
+
+
+def run(arm, servo, seconds):
+    every = round(servo.dt / PHYSICS_DT)
+    for k in range(round(seconds / PHYSICS_DT)):
+        if k % every == 0:
+            servo.update(k * PHYSICS_DT)
+        arm.physics_step()
+
+
+def test_pi_removes_the_load_error_that_the_low_level_leaves():
+    goal = Q0 + np.array([0.1, -0.1, 0.01, 0.2, 0.1, -0.1])
+    arm = LaggingArm()
+    off = PIServo(arm, enabled=False)
+    off.servo_jp(goal)
+    run(arm, off, 1.0)
+    np.testing.assert_allclose(goal - arm.q, LOAD, rtol=1e-3)  # low-level alone
+    arm = LaggingArm()
+    pi = PIServo(arm)
+    pi.servo_jp(goal)
+    run(arm, pi, 1.0)
+    assert np.max(np.abs(goal - arm.q)) < 1e-6
+    # The integrator holds exactly the load it compensates.
+    np.testing.assert_allclose(pi.integrator, LOAD, rtol=1e-4, atol=1e-9)
+
+
+@pytest.mark.parametrize("tau", [0.0, 0.01, 0.05])
+def test_loop_is_stable_from_an_ideal_arm_to_a_slow_one(tau):
+    arm = LaggingArm(tau=tau)
+    pi = PIServo(arm)
+    goal = Q0 + 0.05
+    pi.servo_jp(goal)
+    run(arm, pi, 1.5)
+    assert np.max(np.abs(goal - arm.q)) < 1e-6
+
+
+def test_offset_estimate_drives_true_joints_to_desired():
+    goal = Q0 + np.array([0.05, 0.05, 0.005, 0.0, 0.0, 0.0])
+    arm = LaggingArm(offset=DQ_B)
+    pi = PIServo(arm, offset_estimate=DQ_B)
+    pi.servo_jp(goal)
+    run(arm, pi, 1.0)
+    assert np.max(np.abs(arm.q - goal)) < 1e-6  # TRUE joints at the desired values
+    np.testing.assert_allclose(pi.estimated_jp(), goal, atol=1e-6)
+    np.testing.assert_allclose(pi.commanded[:3], goal[:3] + pi.correction[:3] - DQ_B, atol=1e-12)
+    # Without the estimate the bias stays, invisible in the measurement.
+    arm = LaggingArm(offset=DQ_B)
+    pi = PIServo(arm)
+    pi.servo_jp(goal)
+    run(arm, pi, 1.0)
+    np.testing.assert_allclose(arm.q[:3] - goal[:3], DQ_B, atol=1e-6)
+    assert np.max(np.abs(arm.measured_jp() - goal)) < 1e-6
+
+
+def _release_overshoot(block_seconds):
+    """Peak overshoot of joint 1 after a 0.5 rad step that was blocked for a while."""
+    arm = LaggingArm()
+    pi = PIServo(arm)
+    pi.servo_jp(Q0)
+    run(arm, pi, 0.5)
+    arm.blocked[0] = block_seconds > 0
+    goal = Q0.copy()
+    goal[0] += 0.5  # far beyond max_correction
+    pi.servo_jp(goal)
+    run(arm, pi, block_seconds)
+    blocked_state = (pi.saturated[0], pi.correction[0], pi.integrator[0])
+    arm.blocked[0] = False
+    peak = 0.0
+    every = round(pi.dt / PHYSICS_DT)
+    for k in range(2000):
+        if k % every == 0:
+            pi.update()
+        arm.physics_step()
+        peak = max(peak, arm.q[0] - goal[0])
+    return peak, blocked_state, abs(arm.q[0] - goal[0])
+
+
+def test_anti_windup_bounds_the_integrator_of_a_blocked_joint():
+    gains = PIGains()
+    peak, (saturated, correction, integrator), final = _release_overshoot(3.0)
+    assert saturated
+    assert abs(correction) <= gains.max_correction[0] + 1e-12
+    assert abs(integrator) <= gains.integrator_limit[0] + 1e-12
+    assert final < 1e-5
+    # Blocked for 3 s, the release overshoots no more than an unblocked step does (a wound-up
+    # integrator would add up to integrator_limit = 0.15 rad).
+    peak_free, _, _ = _release_overshoot(0.0)
+    assert peak <= peak_free + 0.005
+
+
+def test_output_is_clamped_to_joint_limits_and_integrator_holds():
+    arm = LaggingArm()
+    pi = PIServo(arm)
+    goal = Q0.copy()
+    goal[4] = JOINT_LIMITS[4, 1]  # load pulls wrist pitch back from its upper limit
+    arm.load[4] = np.deg2rad(1.5)
+    pi.servo_jp(goal)
+    run(arm, pi, 1.0)
+    assert pi.commanded[4] <= JOINT_LIMITS[4, 1]
+    assert pi.integrator[4] < 0.1 * pi.gains.integrator_limit[4] + np.deg2rad(1.5)
+
+
+def test_state_is_observable_and_attach_registers_the_rate():
+    arm = LaggingArm()
+    pi = PIServo(arm, rate=250.0)
+    registered = []
+    handle = pi.attach(lambda period, cb: registered.append((period, cb)) or "h")
+    assert handle == "h" and registered[0][0] == pytest.approx(0.004)
+    registered[0][1](0.004)
+    assert pi.updates == 1 and arm.commands == 1 and pi.last_time == 0.004
+    st = pi.state()
+    for key in ("desired", "measured", "estimate", "error", "integrator", "commanded"):
+        assert st[key].shape == (6,)
+    np.testing.assert_allclose(st["desired"], Q0)  # holds where it was with no setpoint
+
+
+def test_bad_input_is_refused():
+    with pytest.raises(ValueError):
+        PIServo(LaggingArm(), rate=0.0)
+    with pytest.raises(ValueError):
+        PIServo(LaggingArm()).servo_jp([0.0] * 5)
+    with pytest.raises(ValueError):
+        PIServo(LaggingArm()).servo_jp([np.nan] * 6)
+    with pytest.raises(ValueError):
+        PIGains(kp=-1.0)
