@@ -66,6 +66,10 @@ class GroundTruth:
         """Name of the arm holding the needle, or None."""
         return self._world.needle_holder
 
+    def needle_holders(self) -> list[str]:
+        """All arms whose jaws hold the needle (two during a handover), latest grasp last."""
+        return list(self._world.needle_holders)
+
     # ---------------------------------------------------------------- camera
     def segmentation(self, eye: str = "left") -> dict[str, np.ndarray]:
         """Boolean masks per object ("needle", "psm1", "psm2", "phantom") rendered for one eye."""

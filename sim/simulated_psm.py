@@ -121,6 +121,11 @@ class SimulatedJaw:
     def is_busy(self) -> bool:
         return self._setpoint != self._target
 
+    @property
+    def goal(self) -> float:
+        """Where the jaw was last commanded to go (rad)."""
+        return self._target
+
     def update(self, dt: float) -> None:
         """Advance the jaw by one physics step."""
         step = MAX_JAW_SPEED * dt

@@ -22,6 +22,7 @@ from suture_bt.geometry import NeedleModel, PhantomModel
 from suture_bt.kinematics import forward_kinematics
 from suture_bt.kinematics.psm import JAW_CLOSED_THRESHOLD
 from suture_bt.sim.camera import StereoEndoscope
+from suture_bt.sim.grasp import GraspCheck, check_grasp
 from suture_bt.sim.joint_offsets import JointOffset
 from suture_bt.sim.joint_servo import JointServo, ServoParams
 from suture_bt.sim.needle_body import NeedleBody
@@ -29,7 +30,7 @@ from suture_bt.sim.psm_body import LINK_TIP, PSMBody
 from suture_bt.sim.rendering import load_renderer
 from suture_bt.sim.scene import SceneConfig, default_scene
 from suture_bt.sim.simulated_psm import SimulatedPSM
-from suture_bt.transforms import make_transform, pose_to_transform
+from suture_bt.transforms import invert, make_transform, pose_to_transform
 
 #: SRC base (RCM) poses of the two arms in the world (DESIGN.md §5).
 PSM_BASE_POSES = {
@@ -118,7 +119,8 @@ class World:
         self.camera: StereoEndoscope | None = None
         self.needle: NeedleBody | None = None
         self.phantom = None
-        self.needle_holder: str | None = None
+        self.needle_holders: list[str] = []
+        self.last_grasp: dict[str, GraspCheck] = {}
         self._jaw_was_closed = {
             a: arm.jaw.measured_jp()[0] <= JAW_CLOSED_THRESHOLD for a, arm in self.arms.items()
         }
@@ -182,17 +184,37 @@ class World:
         grasp_point = np.array([0.0, 0.0, -GRASP_DEPTH])
         return make_transform(R, grasp_point - R @ self.task.needle.point_at(a))
 
-    def _attach(self, arm: str, T_tip_needle: np.ndarray) -> None:
-        """Hold the needle rigidly in ``arm``'s jaw at ``T_tip_needle`` (tip frame)."""
-        self.needle.attach(self.arms[arm].body.body, LINK_TIP, T_tip_needle)
-        self.needle_holder = arm
-        self.arms[arm].jaw.min_angle = JAW_ON_NEEDLE
+    @property
+    def needle_holder(self) -> str | None:
+        """The arm the needle is rigidly attached to (the latest grasp), or None."""
+        return self.needle_holders[-1] if self.needle_holders else None
 
-    def _release(self) -> None:
-        if self.needle_holder is not None:
-            self.arms[self.needle_holder].jaw.min_angle = 0.0
-        self.needle_holder = None
-        self.needle.detach()
+    def _attach(self, arm: str, T_tip_needle: np.ndarray) -> None:
+        """Hold the needle rigidly in ``arm``'s jaw at ``T_tip_needle`` (tip frame).
+
+        During a handover both jaws hold the needle; it is attached to the latest grasp and
+        passes back to the other arm, where it is, when the latest one opens.
+        """
+        self.needle.attach(self.arms[arm].body.body, LINK_TIP, T_tip_needle)
+        if arm in self.needle_holders:
+            self.needle_holders.remove(arm)
+        self.needle_holders.append(arm)
+        jaw = self.arms[arm].jaw
+        jaw.min_angle = JAW_ON_NEEDLE
+        jaw._angle = max(jaw._angle, JAW_ON_NEEDLE)  # the blades rest on the wire
+
+    def _release(self, arm: str) -> None:
+        """``arm`` opens its jaw on the needle."""
+        self.arms[arm].jaw.min_angle = 0.0
+        was_attached = self.needle_holder == arm
+        self.needle_holders.remove(arm)
+        if not was_attached:
+            return
+        if self.needle_holders:
+            other = self.needle_holders.pop()
+            self._attach(other, invert(self.true_tip_pose(other)) @ self.needle.pose())
+        else:
+            self.needle.detach()
 
     # ------------------------------------------------------------------ time
     def add_periodic(self, period: float, callback: Callable[[float], None]) -> object:
@@ -246,22 +268,33 @@ class World:
         self._after_physics(t)
 
     def _grasp_and_release(self) -> None:
-        """Release when the holding jaw opens; try a grasp when a jaw closes."""
+        """Release when a holding jaw is commanded open; try a grasp when a jaw closes."""
         if self.needle is None:
             return
         for name, arm in self.arms.items():
             closed = arm.jaw.measured_jp()[0] <= JAW_CLOSED_THRESHOLD
-            if name == self.needle_holder and arm.jaw.setpoint_jp()[0] > JAW_ON_NEEDLE:
-                self._release()
-            elif closed and not self._jaw_was_closed[name] and self.needle_holder is None:
+            if name in self.needle_holders and arm.jaw.goal > JAW_CLOSED_THRESHOLD:
+                self._release(name)
+            elif closed and not self._jaw_was_closed[name] and name not in self.needle_holders:
                 grasp = self._grasp_check(name)
                 if grasp is not None:
                     self._attach(name, grasp)
             self._jaw_was_closed[name] = closed
 
     def _grasp_check(self, arm: str) -> np.ndarray | None:
-        """In-hand pose (tip frame) when the needle wire lies between the jaws, else None."""
-        return None
+        """In-hand pose (tip frame) when the needle wire lies between the jaws, else None.
+
+        The geometry (and its tolerances) is :func:`suture_bt.sim.grasp.check_grasp`; the
+        outcome is kept in :attr:`last_grasp` (simulation side, for logs and tests).
+        """
+        result = check_grasp(
+            self.true_tip_pose(arm),
+            float(self.arms[arm].jaw.measured_jp()[0]),
+            self.needle.pose(),
+            self.task.needle,
+        )
+        self.last_grasp[arm] = result
+        return result.T_tip_needle if result.ok else None
 
     def _after_physics(self, t: float) -> None:
         """Held needle follows its jaw; the phantom records crossings and strain."""

@@ -4,8 +4,10 @@ import numpy as np
 import pytest
 
 from suture_bt.interfaces import WorldInterface
+from suture_bt.sim.ground_truth import GroundTruth
 from suture_bt.sim.scene import scene_from_dict
 from suture_bt.sim.world import World, psm_base_frame
+from suture_bt.transforms import invert
 
 
 @pytest.fixture
@@ -93,3 +95,79 @@ def test_task_follows_the_scene_phantom_pose():
         default.close()
         assert np.linalg.norm(p - q) > 5e-3
         assert np.allclose(w.task.phantom.T_world_phantom[:3, 3], (0.01, -0.02, 0.003))
+
+
+def _held_scene(**extra):
+    return scene_from_dict(
+        {"needle": {"start": "in_psm2_jaw"}, "servo": {"error_model": False}, **extra}
+    )
+
+
+def _wire_grasp_goal(T_world_needle, model, arc_deg):
+    """Tip pose with the wire at arc_deg running between PSM1's blades (a reachable variant)."""
+    a = np.deg2rad(arc_deg)
+    goal = np.eye(4)
+    goal[:3, 0] = -(T_world_needle[:3, :3] @ model.tangent_at(a))
+    goal[:3, 2] = -T_world_needle[:3, 2]
+    goal[:3, 1] = np.cross(goal[:3, 2], goal[:3, 0])
+    goal[:3, 3] = T_world_needle[:3, :3] @ model.point_at(a) + T_world_needle[:3, 3]
+    return goal
+
+
+def test_needle_starts_in_psm2_jaw_and_follows_it():
+    with World.from_scene(_held_scene(), with_camera=False) as w:
+        gt = GroundTruth(w)
+        assert gt.needle_holder() == "psm2"
+        assert 0 < w.psm2.jaw.measured_jp()[0] <= 0.2  # blades rest on the wire
+        in_hand = invert(gt.tip_pose_world("psm2")) @ gt.needle_pose()
+        w.psm2.move_jp(w.psm2.setpoint_jp() + np.array([0.1, 0.05, 0.01, 0.2, 0.1, 0.1]))
+        w.step(0.8)
+        assert not w.psm2.is_busy()
+        after = invert(gt.tip_pose_world("psm2")) @ gt.needle_pose()
+        assert np.allclose(after, in_hand, atol=1e-6)
+
+
+def test_handover_grasp_geometry_and_release():
+    with World.from_scene(_held_scene(), with_camera=False) as w:
+        gt = GroundTruth(w)
+        goal = _wire_grasp_goal(gt.needle_pose(), w.task.needle, 80.0)
+        # Closing far from the needle grasps nothing.
+        w.psm1.jaw.open()
+        w.step(0.6)
+        w.psm1.jaw.close()
+        w.step(0.6)
+        assert gt.needle_holder() == "psm2"
+        assert not w.last_grasp["psm1"].ok and "mm" in w.last_grasp["psm1"].reason
+        # Closing with the wire between the blades grasps it: a handover.
+        w.psm1.jaw.open()
+        w.psm1.move_cp(invert(w.psm1.base_frame()) @ goal)
+        while w.psm1.is_busy():
+            w.step(0.1)
+        T_before = gt.needle_pose()
+        w.psm1.jaw.close()
+        w.step(0.8)
+        assert w.last_grasp["psm1"].ok, w.last_grasp["psm1"].reason
+        assert gt.needle_holders() == ["psm2", "psm1"]
+        # The in-hand pose is what the geometry gives: the needle did not jump.
+        assert np.linalg.norm(gt.needle_pose()[:3, 3] - T_before[:3, 3]) < 1.6e-3
+        w.psm2.jaw.open()
+        w.step(0.2)
+        assert gt.needle_holders() == ["psm1"]
+        in_hand = invert(gt.tip_pose_world("psm1")) @ gt.needle_pose()
+        w.psm1.move_jp(w.psm1.setpoint_jp() + np.array([0.05, 0.05, -0.01, 0, 0, 0]))
+        w.step(0.5)
+        assert np.allclose(invert(gt.tip_pose_world("psm1")) @ gt.needle_pose(), in_hand, atol=1e-6)
+        # Opening the last jaw releases the needle.
+        w.psm1.jaw.open()
+        w.step(0.05)
+        assert gt.needle_holder() is None
+
+
+def test_released_needle_falls():
+    with World.from_scene(_held_scene(), with_camera=False) as w:
+        gt = GroundTruth(w)
+        z0 = gt.needle_pose()[2, 3]
+        w.psm2.jaw.open()
+        w.step(0.1)
+        assert gt.needle_holder() is None
+        assert gt.needle_pose()[2, 3] < z0 - 0.01  # free fall: ~ g t² / 2 = 49 mm
