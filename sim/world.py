@@ -26,7 +26,7 @@ from suture_bt.sim.grasp import GraspCheck, check_grasp
 from suture_bt.sim.joint_offsets import JointOffset
 from suture_bt.sim.joint_servo import JointServo, ServoParams
 from suture_bt.sim.needle_body import NeedleBody
-from suture_bt.sim.psm_body import LINK_TIP, PSMBody
+from suture_bt.sim.psm_body import LINK_JAWS, LINK_TIP, PSMBody
 from suture_bt.sim.rendering import load_renderer
 from suture_bt.sim.scene import SceneConfig, default_scene
 from suture_bt.sim.simulated_psm import SimulatedPSM
@@ -303,6 +303,26 @@ class World:
             self.needle.update()
 
     # ------------------------------------------------------------------ helpers
+    def segmentation_masks(self, eye: str = "left") -> dict[str, np.ndarray]:
+        """Noise-free render of one eye as boolean masks per object (ground truth).
+
+        Keys: "needle", "psm1", "psm2", "psm1_jaws", "psm2_jaws" and "phantom" (when present).
+        """
+        if self.camera is None:
+            raise RuntimeError("this world was built without a camera")
+        view = self.camera.render(eye, with_segmentation=True)
+        masks = {}
+        if self.needle is not None:
+            masks["needle"] = view.mask(self.needle.id)
+        for name, arm in self.arms.items():
+            masks[name] = view.mask(arm.body.body)
+            masks[f"{name}_jaws"] = view.mask(arm.body.body, LINK_JAWS[0]) | view.mask(
+                arm.body.body, LINK_JAWS[1]
+            )
+        if self.phantom is not None:
+            masks["phantom"] = view.mask(self.phantom.id)
+        return masks
+
     def true_tip_pose(self, arm: str) -> np.ndarray:
         """World pose of an arm's true tip (ground truth; use ``ground_truth``)."""
         a = self.arms[arm]
