@@ -19,8 +19,9 @@ from suture_bt.transforms import invert, make_transform, matrix_from_quat_xyzw, 
 #: Simulated mass. The real needle weighs about 0.07 g; a heavier one keeps contacts stable at
 #: 1 kHz and changes nothing else (the needle is only ever resting, held or frozen).
 NEEDLE_MASS = 0.002
-#: Collision spheres along the arc (only for contacts; the visual is the exact mesh).
-N_COLLISION_SPHERES = 24
+#: Collision capsules along the arc's chords (only for contacts; the visual is the exact mesh).
+#: pybullet keeps at most 16 children of a compound shape and silently drops the rest.
+N_COLLISION_SEGMENTS = 15
 NEEDLE_RGBA = (0.62, 0.63, 0.66, 1.0)
 NEEDLE_SPECULAR = (0.9, 0.9, 0.9)
 #: Force limit of the grasp/tissue constraints (N): far above the needle's weight.
@@ -77,13 +78,24 @@ class NeedleBody:
             visualFramePosition=list(-self._com),
             physicsClientId=client,
         )
-        centres = model.point_at(
-            np.linspace(model.base_angle, model.tip_angle, N_COLLISION_SPHERES)
+        ends = model.point_at(
+            np.linspace(model.base_angle, model.tip_angle, N_COLLISION_SEGMENTS + 1)
         )
+        chords = ends[1:] - ends[:-1]
+        lengths = np.linalg.norm(chords, axis=1)
+        # Capsule axis is local z: rotate z onto each chord (chords lie in the needle x-y plane).
+        quats = []
+        for d in chords / lengths[:, None]:
+            x = np.cross(d, [0.0, 0.0, 1.0])
+            quats.append(list(quat_xyzw(np.stack([x, np.cross(d, x), d], 1))))
         col = p.createCollisionShapeArray(
-            shapeTypes=[p.GEOM_SPHERE] * N_COLLISION_SPHERES,
-            radii=[model.wire_radius] * N_COLLISION_SPHERES,
-            collisionFramePositions=[list(c - self._com) for c in centres],
+            shapeTypes=[p.GEOM_CAPSULE] * N_COLLISION_SEGMENTS,
+            radii=[model.wire_radius] * N_COLLISION_SEGMENTS,
+            lengths=list(lengths),
+            collisionFramePositions=[
+                list((a + b) / 2 - self._com) for a, b in zip(ends[:-1], ends[1:], strict=True)
+            ],
+            collisionFrameOrientations=quats,
             physicsClientId=client,
         )
         T_world_com = np.asarray(T_world_needle) @ self._T_needle_com
@@ -192,7 +204,11 @@ class NeedleBody:
         return False
 
     def update(self) -> None:
-        """Call once per physics step: re-enables tissue contact once a free needle is clear."""
+        """Call after every physics step: a held needle is snapped exactly onto its holder (the
+        constraint alone lags a moving, kinematically reset arm by ~0.1-0.3 mm); a released
+        needle gets its tissue contacts back once it is clear of the tissue."""
+        if self._held_by is not None:
+            self.sync_to_holder()
         if self._pending_tissue and self.state == "free" and not self._penetrates_tissue():
             self._set_tissue_collision(True)
             self._pending_tissue = False

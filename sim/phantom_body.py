@@ -1,0 +1,339 @@
+"""The suturing phantom in pybullet, and the bookkeeping of the needle passing through it.
+
+Geometry (all in the phantom frame, so a moved or rotated phantom works): a flat tissue block
+whose top is at ``TISSUE_TOP_Z`` and, for each port pair, a ridge segment whose two flanks are
+the planes through that pair's entry and exit ports with the ports' outward normals (pitched
+∓46.1°). The flanks are thin box slabs (boxes render and collide exactly; the interior of the
+ridge is never seen). Each port is marked by a dark 5 × 5 mm square (a thin box without
+collision) lying on its flank.
+
+Bookkeeping (:meth:`PhantomBody.update`, once per physics step): for every port, each needle
+tip crossing of the port plane within ``CAPTURE_RADIUS`` of the port, with the SRC sign
+convention (tip z in the port frame: + to − at an entry, − to + at an exit), the lateral
+distance √(x² + y²) at the crossing (interpolated between steps), how far the tip gets out past
+an exit, and the tissue strain at every engaged port.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+import numpy as np
+import pybullet as p
+
+from suture_bt.geometry.needle import NeedleModel
+from suture_bt.geometry.phantom import PORT_MARK_SIZE, TISSUE_TOP_Z, PhantomModel, Port
+from suture_bt.sim.rendering import load_renderer
+from suture_bt.transforms import invert, make_transform, quat_xyzw
+
+#: Flat block: x and y extent (phantom frame, metres) and thickness below ``TISSUE_TOP_Z``.
+BLOCK_X = (-0.045, 0.045)
+BLOCK_Y = (-0.055, 0.075)
+BLOCK_THICKNESS = 0.01
+#: Ridge flank slabs: thickness, and how far they reach below the block top (hidden).
+SLAB_THICKNESS = 0.002
+SLAB_SINK = 0.002
+#: How far the ridge runs past the outer pairs (m).
+RIDGE_END_MARGIN = 0.012
+MARK_THICKNESS = 0.0002
+TISSUE_RGBA = (0.86, 0.56, 0.53, 1.0)
+RIDGE_RGBA = (0.83, 0.50, 0.48, 1.0)
+MARK_RGBA = (0.12, 0.09, 0.09, 1.0)
+#: A tip crossing of a port plane is recorded when it lies within this distance of the port.
+CAPTURE_RADIUS = 0.010
+#: A port is engaged while the needle centre-line pierces its plane within this distance.
+ENGAGE_RADIUS = 0.005
+_N_CENTERLINE = 241
+
+
+@dataclass
+class Crossing:
+    """One tip crossing of a port plane (SRC convention: +→− at entries, −→+ at exits)."""
+
+    port: str
+    pair: int
+    kind: str  # "entry" or "exit"
+    t: float  # interpolated time of the crossing (s)
+    inward: bool  # True for + to − (tip going into the tissue)
+    lateral: float  # √(x² + y²) in the port frame at the crossing (m)
+    point: np.ndarray  # crossing point in the port frame
+    tip_out: float = 0.0  # exits: greatest tip distance from the crossing point while out (m)
+
+    @property
+    def src_direction(self) -> bool:
+        """True when the direction is the one SRC scores (into an entry, out of an exit)."""
+        return self.inward if self.kind == "entry" else not self.inward
+
+
+@dataclass
+class Strain:
+    """Distances (m) from an engaged port to the needle's circle (3-D) and plane."""
+
+    circle: float
+    plane: float
+
+
+@dataclass
+class _Segment:
+    """A ridge segment: y range and the two flank planes (point, outward normal), phantom frame."""
+
+    y0: float
+    y1: float
+    entry: Port
+    exit: Port
+    slabs: list[np.ndarray] = field(default_factory=list)  # slab frames (phantom frame)
+    half_extents: list[np.ndarray] = field(default_factory=list)
+
+
+def _flank_slab(port: Port, peak_x: float, y0: float, y1: float) -> tuple[np.ndarray, np.ndarray]:
+    """Frame and half extents of a slab whose top face is the port's flank, base to peak."""
+    R = port.T[:3, :3]
+    n, u = R[:, 2], R[:, 0]  # normal, in-plane direction perpendicular to y
+    p0 = port.T[:3, 3]
+    # Points on the flank at the peak x and SLAB_SINK below the block top, as in-plane offsets.
+    s_peak = (peak_x - p0[0]) / u[0]
+    s_base = (TISSUE_TOP_Z - SLAB_SINK - p0[2]) / u[2]
+    s0, s1 = sorted((s_peak, s_base))
+    centre = p0 + u * (s0 + s1) / 2 - n * SLAB_THICKNESS / 2
+    centre[1] = (y0 + y1) / 2
+    half = np.array([(s1 - s0) / 2, (y1 - y0) / 2, SLAB_THICKNESS / 2])
+    return make_transform(R, centre), half
+
+
+def _peak_x(entry: Port, exit_: Port) -> float:
+    """x of the line where the two flank planes meet (they both contain the y direction)."""
+    ne, nx = entry.T[:3, 2], exit_.T[:3, 2]
+    pe, px = entry.T[:3, 3], exit_.T[:3, 3]
+    # n·(q − p) = 0 for both planes in (x, z): solve the 2×2 system.
+    A = np.array([[ne[0], ne[2]], [nx[0], nx[2]]])
+    b = np.array([ne[0] * pe[0] + ne[2] * pe[2], nx[0] * px[0] + nx[2] * px[2]])
+    return float(np.linalg.solve(A, b)[0])
+
+
+class PhantomBody:
+    """The phantom in one pybullet client; records the needle's port crossings and strain."""
+
+    def __init__(
+        self, client: int, phantom: PhantomModel, needle_model: NeedleModel | None = None
+    ) -> None:
+        self.client = client
+        self.phantom = phantom
+        self.needle_model = needle_model if needle_model is not None else NeedleModel()
+        load_renderer(client)  # bodies created before the EGL plugin loads are never drawn
+        self._segments = self._build_segments()
+        self.id, self.slab_links, self.mark_links = self._create_body()
+        self.crossings: list[Crossing] = []
+        self.strain: dict[str, Strain] = {}
+        self.max_strain: dict[str, Strain] = {}
+        self._last_tip: dict[str, np.ndarray] = {}
+        self._last_t: float | None = None
+        self._open_exit: dict[str, Crossing] = {}
+
+    # --- geometry ---------------------------------------------------------------------------
+    def _build_segments(self) -> list[_Segment]:
+        pairs = [
+            (
+                next(q for q in self.phantom.ports_in_phantom if q.name == f"entry{i}"),
+                next(q for q in self.phantom.ports_in_phantom if q.name == f"exit{i}"),
+            )
+            for i in range(1, self.phantom.num_pairs + 1)
+        ]
+        pairs.sort(key=lambda pe: pe[0].T[1, 3])
+        ys = [pe[0].T[1, 3] for pe in pairs]
+        edges = (
+            [ys[0] - RIDGE_END_MARGIN]
+            + [(a + b) / 2 for a, b in zip(ys[:-1], ys[1:], strict=True)]
+            + [ys[-1] + RIDGE_END_MARGIN]
+        )
+        segments = []
+        for (entry, exit_), y0, y1 in zip(pairs, edges[:-1], edges[1:], strict=True):
+            seg = _Segment(y0, y1, entry, exit_)
+            peak = _peak_x(entry, exit_)
+            for port in (entry, exit_):
+                T, half = _flank_slab(port, peak, y0, y1)
+                seg.slabs.append(T)
+                seg.half_extents.append(half)
+            segments.append(seg)
+        return segments
+
+    def _create_body(self) -> tuple[int, list[int], dict[str, int]]:
+        c = self.client
+        block_half = [(BLOCK_X[1] - BLOCK_X[0]) / 2, (BLOCK_Y[1] - BLOCK_Y[0]) / 2]
+        block_half.append(BLOCK_THICKNESS / 2)
+        block_centre = [
+            (BLOCK_X[0] + BLOCK_X[1]) / 2,
+            (BLOCK_Y[0] + BLOCK_Y[1]) / 2,
+            TISSUE_TOP_Z - BLOCK_THICKNESS / 2,
+        ]
+        base_col = p.createCollisionShape(
+            p.GEOM_BOX, halfExtents=block_half, collisionFramePosition=block_centre,
+            physicsClientId=c,
+        )  # fmt: skip
+        base_vis = p.createVisualShape(
+            p.GEOM_BOX, halfExtents=block_half, visualFramePosition=block_centre,
+            rgbaColor=list(TISSUE_RGBA), specularColor=[0.2, 0.2, 0.2], physicsClientId=c,
+        )  # fmt: skip
+        frames, cols, vis = [], [], []
+        for seg in self._segments:
+            for T, half in zip(seg.slabs, seg.half_extents, strict=True):
+                frames.append(T)
+                cols.append(
+                    p.createCollisionShape(p.GEOM_BOX, halfExtents=list(half), physicsClientId=c)
+                )
+                vis.append(
+                    p.createVisualShape(
+                        p.GEOM_BOX,
+                        halfExtents=list(half),
+                        rgbaColor=list(RIDGE_RGBA),
+                        specularColor=[0.2, 0.2, 0.2],
+                        physicsClientId=c,
+                    )  # fmt: skip
+                )
+        n_slabs = len(frames)
+        mark_half = [PORT_MARK_SIZE / 2, PORT_MARK_SIZE / 2, MARK_THICKNESS / 2]
+        mark_links = {}
+        for port in self.phantom.ports_in_phantom:
+            T = port.T @ make_transform(position=(0, 0, MARK_THICKNESS / 2))
+            mark_links[port.name] = len(frames)
+            frames.append(T)
+            cols.append(-1)
+            vis.append(
+                p.createVisualShape(
+                    p.GEOM_BOX,
+                    halfExtents=mark_half,
+                    rgbaColor=list(MARK_RGBA),
+                    specularColor=[0.1, 0.1, 0.1],
+                    physicsClientId=c,
+                )  # fmt: skip
+            )
+        Tw = self.phantom.T_world_phantom
+        n = len(frames)
+        body = p.createMultiBody(
+            baseMass=0.0,
+            baseCollisionShapeIndex=base_col,
+            baseVisualShapeIndex=base_vis,
+            basePosition=list(Tw[:3, 3]),
+            baseOrientation=list(quat_xyzw(Tw[:3, :3])),
+            linkMasses=[0.0] * n,
+            linkCollisionShapeIndices=cols,
+            linkVisualShapeIndices=vis,
+            linkPositions=[list(T[:3, 3]) for T in frames],
+            linkOrientations=[list(quat_xyzw(T[:3, :3])) for T in frames],
+            linkInertialFramePositions=[[0, 0, 0]] * n,
+            linkInertialFrameOrientations=[[0, 0, 0, 1]] * n,
+            linkParentIndices=[0] * n,
+            linkJointTypes=[p.JOINT_FIXED] * n,
+            linkJointAxis=[[0, 0, 0]] * n,
+            physicsClientId=c,
+        )
+        p.changeDynamics(body, -1, lateralFriction=1.0, physicsClientId=c)
+        for link in range(n):
+            p.changeDynamics(body, link, lateralFriction=1.0, physicsClientId=c)
+        return body, list(range(n_slabs)), mark_links
+
+    def inside_tissue(self, points_world: np.ndarray) -> np.ndarray:
+        """Which world points lie inside the tissue (block or ridge solid), boolean per point."""
+        q = np.atleast_2d(points_world) @ invert(self.phantom.T_world_phantom)[:3, :3].T
+        q = q + invert(self.phantom.T_world_phantom)[:3, 3]
+        x, y, z = q.T
+        inside = (
+            (BLOCK_X[0] <= x)
+            & (x <= BLOCK_X[1])
+            & (BLOCK_Y[0] <= y)
+            & (y <= BLOCK_Y[1])
+            & (z <= TISSUE_TOP_Z)
+            & (z >= TISSUE_TOP_Z - BLOCK_THICKNESS)
+        )
+        for seg in self._segments:
+            below_flanks = np.ones(len(q), bool)
+            for port in (seg.entry, seg.exit):
+                below_flanks &= (q - port.T[:3, 3]) @ port.T[:3, 2] <= 0.0
+            inside |= below_flanks & (seg.y0 <= y) & (y <= seg.y1) & (z >= TISSUE_TOP_Z)
+        return inside
+
+    # --- needle bookkeeping -----------------------------------------------------------------
+    def _centerline_world(self, T_world_needle: np.ndarray) -> np.ndarray:
+        pts = self.needle_model.centerline(_N_CENTERLINE)
+        return pts @ T_world_needle[:3, :3].T + T_world_needle[:3, 3]
+
+    def inserted(self, T_world_needle: np.ndarray) -> bool:
+        """True when the needle is stuck in the tissue (its centre-line passes into it)."""
+        return bool(self.inside_tissue(self._centerline_world(T_world_needle)).any())
+
+    def engaged_ports(self, T_world_needle: np.ndarray) -> list[str]:
+        """Ports whose plane the centre-line pierces within ``ENGAGE_RADIUS`` of the port."""
+        pts = self._centerline_world(T_world_needle)
+        out = []
+        for port in self.phantom.ports():
+            local = (pts - port.T[:3, 3]) @ port.T[:3, :3]
+            z = local[:, 2]
+            idx = np.nonzero(np.sign(z[:-1]) * np.sign(z[1:]) < 0)[0]
+            for i in idx:
+                s = z[i] / (z[i] - z[i + 1])
+                c = local[i] + s * (local[i + 1] - local[i])
+                if np.hypot(c[0], c[1]) <= ENGAGE_RADIUS:
+                    out.append(port.name)
+                    break
+        return out
+
+    def port_strain(self, T_world_needle: np.ndarray, port: Port) -> Strain:
+        """Distance from a port to the needle's circle (3-D) and to its plane."""
+        q = invert(T_world_needle) @ np.r_[port.position, 1.0]
+        rho = np.hypot(q[0], q[1])
+        return Strain(
+            circle=float(np.hypot(rho - self.needle_model.radius, q[2])), plane=float(abs(q[2]))
+        )
+
+    def update(self, T_world_needle: np.ndarray, t: float) -> list[Crossing]:
+        """Record tip crossings since the last call and the current strain; returns new ones."""
+        T_world_needle = np.asarray(T_world_needle, dtype=float)
+        tip = T_world_needle[:3, :3] @ self.needle_model.tip + T_world_needle[:3, 3]
+        new = []
+        for port in self.phantom.ports():
+            local = invert(port.T) @ np.r_[tip, 1.0]
+            local = local[:3]
+            prev = self._last_tip.get(port.name)
+            self._last_tip[port.name] = local
+            if prev is not None and self._last_t is not None:
+                inward = prev[2] > 0.0 >= local[2]
+                outward = prev[2] <= 0.0 < local[2]
+                if inward or outward:
+                    s = prev[2] / (prev[2] - local[2])
+                    c = prev + s * (local - prev)
+                    lateral = float(np.hypot(c[0], c[1]))
+                    if lateral <= CAPTURE_RADIUS:
+                        rec = Crossing(
+                            port.name,
+                            port.pair,
+                            port.kind,
+                            float(self._last_t + s * (t - self._last_t)),
+                            bool(inward),
+                            lateral,
+                            c,
+                        )
+                        self.crossings.append(rec)
+                        new.append(rec)
+                        self._open_exit.pop(port.name, None)
+                        if port.kind == "exit" and outward:
+                            self._open_exit[port.name] = rec
+            rec = self._open_exit.get(port.name)
+            if rec is not None:
+                if local[2] > 0.0:
+                    rec.tip_out = max(rec.tip_out, float(np.linalg.norm(local - rec.point)))
+                else:
+                    self._open_exit.pop(port.name)
+        self._last_t = float(t)
+        self.strain = {}
+        for name in self.engaged_ports(T_world_needle):
+            s = self.port_strain(T_world_needle, self.phantom.port(name))
+            self.strain[name] = s
+            m = self.max_strain.get(name)
+            if m is None or s.circle > m.circle:
+                self.max_strain[name] = s
+        return new
+
+    def reset_tracking(self) -> None:
+        """Forget the last tip position (call after teleporting the needle)."""
+        self._last_tip.clear()
+        self._last_t = None
+        self._open_exit.clear()
