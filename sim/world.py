@@ -12,6 +12,9 @@ What skills may see is :attr:`World.task` (the known phantom and needle models),
 
 from __future__ import annotations
 
+import contextlib
+import os
+import sys
 from collections.abc import Callable
 from dataclasses import dataclass, field
 
@@ -44,6 +47,25 @@ SRC_NEEDLE_REST_POSITION = (-0.0208, 0.0562, 0.0717)
 GRASP_DEPTH = 0.0015
 #: Jaw angle at which the blades touch a 0.72 mm wire held GRASP_DEPTH behind the tip.
 JAW_ON_NEEDLE = 0.08
+
+
+@contextlib.contextmanager
+def quiet_fd(fd: int):
+    """Silence C-level output on a file descriptor (pybullet plugin banners)."""
+    try:
+        (sys.stdout if fd == 1 else sys.stderr).flush()
+        saved = os.dup(fd)
+    except (OSError, ValueError):
+        yield
+        return
+    devnull = os.open(os.devnull, os.O_WRONLY)
+    try:
+        os.dup2(devnull, fd)
+        yield
+    finally:
+        os.dup2(saved, fd)
+        os.close(saved)
+        os.close(devnull)
 
 
 def psm_base_frame(arm: str) -> np.ndarray:
@@ -332,7 +354,8 @@ class World:
         """Disconnect the pybullet client (idempotent)."""
         if not self._closed:
             self._closed = True
-            pb.disconnect(physicsClientId=self.client)
+            with quiet_fd(1):  # the EGL plugin prints a banner on disconnect
+                pb.disconnect(physicsClientId=self.client)
 
     def __enter__(self) -> World:
         return self

@@ -25,6 +25,7 @@ def _run(*args, cwd=None):
         (["frobnicate"], "invalid choice"),
         (["scene", "--zoom", "3"], "unrecognized arguments"),
         ([], "a command is required"),
+        (["scene", "--out", "/proc/no-such-dir/out"], "No such file or directory"),
     ],
 )
 def test_bad_input_one_line_nonzero_exit(args, fragment):

@@ -9,7 +9,7 @@ import numpy as np
 
 from suture_bt.sim import ground_truth
 from suture_bt.sim.scene import load_scene
-from suture_bt.sim.world import World
+from suture_bt.sim.world import World, quiet_fd
 from suture_bt.transforms import matrix_to_rpy
 
 
@@ -86,9 +86,13 @@ def run(args, preface: str | None = None) -> int:
     scene = load_scene(args.scene)
     if preface:
         print(preface)
-    with World.from_scene(scene) as world:
-        settle(world)
-        paths = write_stereo_pair(world, Path(args.out))
+    # pybullet's EGL plugin chats on stderr; keep stderr for our own one-line errors.
+    with quiet_fd(2):
+        world = World.from_scene(scene)
+    with world:
+        with quiet_fd(2):
+            settle(world)
+            paths = write_stereo_pair(world, Path(args.out))
         print(summary(world))
         cam = scene.camera
         if paths:
