@@ -36,8 +36,9 @@ FAR = 2.0
 R_GL_CV = np.diag([1.0, -1.0, -1.0])
 #: RGB shown where no object is hit (the dark body cavity rather than pybullet's grey-blue).
 BACKGROUND_RGB = (24, 14, 14)
-#: Light from the endoscope tip (pybullet direction towards the light, in the camera frame).
-LIGHT_DIRECTION_CAMFRAME = (0.0, 0.3, 1.0)
+#: Direction towards the light, world frame. Overhead: oblique directions make the EGL
+#: renderer's shadow map cut a hard, false edge across the tissue.
+LIGHT_DIRECTION_WORLD = (0.0, 0.0, 1.0)
 
 
 def default_camera_frame() -> np.ndarray:
@@ -129,19 +130,29 @@ def render_view(
     with_segmentation: bool = True,
     light_direction=None,
 ) -> RenderResult:
-    """Render a pinhole camera exactly (tiles above 1024×768), background darkened."""
+    """Render a pinhole camera exactly (tiles above 1024×768).
+
+    With segmentation, pixels that hit nothing are painted ``BACKGROUND_RGB``; without it
+    (faster) they keep pybullet's clear colour, which the phantom's floor hides in the scene.
+    """
     kind = load_renderer(client)
     flag = p.ER_BULLET_HARDWARE_OPENGL if kind == "egl" else p.ER_TINY_RENDERER
     T_world_gl = cam.T_world_cam @ make_transform(R_GL_CV)
     view = _gl_matrix(invert(T_world_gl))
     if light_direction is None:
-        light_direction = cam.T_world_cam[:3, :3] @ (R_GL_CV @ np.array(LIGHT_DIRECTION_CAMFRAME))
+        light_direction = LIGHT_DIRECTION_WORLD
     max_w, max_h = (MAX_TILE_WIDTH, MAX_TILE_HEIGHT) if kind == "egl" else (cam.width, cam.height)
     W, H = cam.width, cam.height
     rgb = np.empty((H, W, 3), np.uint8)
     zbuf = np.empty((H, W), np.float32)
-    seg = np.empty((H, W), np.int32)
-    flags = p.ER_SEGMENTATION_MASK_OBJECT_AND_LINKINDEX
+    seg = np.full((H, W), -1, np.int32)
+    # The segmentation pass costs ~40 % extra; captures skip it (the phantom's dark floor
+    # fills the background, so no darkening is needed).
+    flags = (
+        p.ER_SEGMENTATION_MASK_OBJECT_AND_LINKINDEX
+        if with_segmentation
+        else p.ER_NO_SEGMENTATION_MASK
+    )
     for r0, r1 in _tiles(H, max_h):
         for c0, c1 in _tiles(W, max_w):
             # Tile edges (pixel centre ± 0.5) on the near plane; rows run downwards in OpenCV.
@@ -164,8 +175,10 @@ def render_view(
             )
             rgb[r0:r1, c0:c1] = np.asarray(img, np.uint8).reshape(h, w, 4)[:, :, :3]
             zbuf[r0:r1, c0:c1] = np.asarray(depth, np.float32).reshape(h, w)
-            seg[r0:r1, c0:c1] = np.asarray(segm, np.int32).reshape(h, w)
-    rgb[seg < 0] = BACKGROUND_RGB
+            if with_segmentation:
+                seg[r0:r1, c0:c1] = np.asarray(segm, np.int32).reshape(h, w)
+    if with_segmentation:
+        rgb[seg < 0] = BACKGROUND_RGB
     depth_m = FAR * NEAR / (FAR - (FAR - NEAR) * zbuf.astype(np.float64))
     return RenderResult(rgb=rgb, depth=depth_m, segmentation=seg if with_segmentation else None)
 

@@ -5,7 +5,10 @@ whose top is at ``TISSUE_TOP_Z`` and, for each port pair, a ridge segment whose 
 the planes through that pair's entry and exit ports with the ports' outward normals (pitched
 ∓46.1°). The flanks are thin box slabs (boxes render and collide exactly; the interior of the
 ridge is never seen). Each port is marked by a dark 5 × 5 mm square (a thin box without
-collision) lying on its flank.
+collision) lying on its flank. A large dark floor 3 cm below stands for the body cavity.
+
+Links of the body: ``slab_links`` (ridge), ``mark_links[port name]``, ``floor_link``; the
+base link (−1) is the flat block.
 
 Bookkeeping (:meth:`PhantomBody.update`, once per physics step): for every port, each needle
 tip crossing of the port plane within ``CAPTURE_RADIUS`` of the port, with the SRC sign
@@ -36,6 +39,11 @@ SLAB_SINK = 0.002
 #: How far the ridge runs past the outer pairs (m).
 RIDGE_END_MARGIN = 0.012
 MARK_THICKNESS = 0.0002
+#: A large dark floor under the tissue: the body cavity seen around the phantom (every view
+#: ray of the endoscope ends on it, so images need no background fill).
+FLOOR_HALF_SIZE = 0.5
+FLOOR_DEPTH = 0.03
+FLOOR_RGBA = (0.09, 0.05, 0.05, 1.0)
 TISSUE_RGBA = (0.86, 0.56, 0.53, 1.0)
 RIDGE_RGBA = (0.83, 0.50, 0.48, 1.0)
 MARK_RGBA = (0.12, 0.09, 0.09, 1.0)
@@ -206,6 +214,19 @@ class PhantomBody:
                     physicsClientId=c,
                 )  # fmt: skip
             )
+        self.floor_link = len(frames)
+        floor_half = [FLOOR_HALF_SIZE, FLOOR_HALF_SIZE, 0.001]
+        frames.append(make_transform(position=(0.0, 0.0, TISSUE_TOP_Z - FLOOR_DEPTH)))
+        cols.append(p.createCollisionShape(p.GEOM_BOX, halfExtents=floor_half, physicsClientId=c))
+        vis.append(
+            p.createVisualShape(
+                p.GEOM_BOX,
+                halfExtents=floor_half,
+                rgbaColor=list(FLOOR_RGBA),
+                specularColor=[0.0, 0.0, 0.0],
+                physicsClientId=c,
+            )  # fmt: skip
+        )
         Tw = self.phantom.T_world_phantom
         n = len(frames)
         body = p.createMultiBody(
