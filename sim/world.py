@@ -29,6 +29,7 @@ from suture_bt.sim.grasp import GraspCheck, check_grasp
 from suture_bt.sim.joint_offsets import JointOffset
 from suture_bt.sim.joint_servo import JointServo, ServoParams
 from suture_bt.sim.needle_body import NeedleBody
+from suture_bt.sim.phantom_body import PhantomBody
 from suture_bt.sim.psm_body import LINK_JAWS, LINK_TIP, PSMBody
 from suture_bt.sim.rendering import load_renderer
 from suture_bt.sim.scene import SceneConfig, default_scene
@@ -43,6 +44,10 @@ PSM_BASE_POSES = {
 GRAVITY = (0.0, 0.0, -9.81)
 #: SRC initial needle pose, resting on the tissue, in the phantom frame (DESIGN.md §5).
 SRC_NEEDLE_REST_POSITION = (-0.0208, 0.0562, 0.0717)
+#: The phantom's crossing/strain bookkeeping runs while the needle's centre of mass is within
+#: this distance of a port: the needle (radius 10.2 mm) can then reach the 10 mm capture
+#: radius of a port plane; farther away nothing can cross or engage.
+PORT_WATCH_RADIUS = 0.035
 #: Where a held wire sits behind the tip control point, along −tip z (inside the blades).
 GRASP_DEPTH = 0.0015
 #: Jaw angle at which the blades touch a 0.72 mm wire held GRASP_DEPTH behind the tip.
@@ -140,7 +145,7 @@ class World:
         self.psm2 = self.arms["psm2"]
         self.camera: StereoEndoscope | None = None
         self.needle: NeedleBody | None = None
-        self.phantom = None
+        self.phantom: PhantomBody | None = None
         self.needle_holders: list[str] = []
         self.last_grasp: dict[str, GraspCheck] = {}
         self._jaw_was_closed = {
@@ -170,7 +175,8 @@ class World:
                 rng=np.random.default_rng([self.scene.seed, 11]),
             )
             self.camera.set_clock(self.clock.now)
-        tissue_ids: tuple[int, ...] = ()
+        self.phantom = PhantomBody(self.client, self.task.phantom, self.task.needle)
+        tissue_ids = (self.phantom.id,)
         T_needle = self._needle_start_pose()
         self.needle = NeedleBody(self.client, self.task.needle, T_needle, tissue_ids)
         for arm in self.arms.values():
@@ -178,9 +184,15 @@ class World:
         if self.scene.needle.start == "in_psm2_jaw":
             self.psm2.jaw.servo_jp(0.0)
             self._attach("psm2", self.in_jaw_grasp_pose())
-        elif self.phantom is None:
-            # No tissue body to rest on yet: the tissue holds the needle where it starts.
+        elif self.phantom.inserted(T_needle):
+            # A needle that starts stuck in the tissue is held there.
             self.needle.freeze(T_needle)
+        self._port_positions = np.array([p.position for p in self.task.phantom.ports()])
+        self._phantom_tracking = False
+        self._last_needle_state: np.ndarray | None = None
+        if self._needle_near_ports()[0]:
+            self.phantom.update(self.needle.pose(), 0.0)
+            self._phantom_tracking = True
 
     def _needle_start_pose(self) -> np.ndarray:
         """World pose of the needle at start, per the scene."""
@@ -237,6 +249,9 @@ class World:
             self._attach(other, invert(self.true_tip_pose(other)) @ self.needle.pose())
         else:
             self.needle.detach()
+            T = self.needle.pose()
+            if self.phantom.inserted(T):
+                self.needle.freeze(T)  # the tissue holds an inserted needle that is released
 
     # ------------------------------------------------------------------ time
     def add_periodic(self, period: float, callback: Callable[[float], None]) -> object:
@@ -321,8 +336,30 @@ class World:
     def _after_physics(self, t: float) -> None:
         """Held needle follows its jaw; the phantom records crossings and strain."""
         if self.needle is not None:
-            self.needle.sync_to_holder()
-            self.needle.update()
+            self.needle.update()  # a held needle snaps exactly onto its jaw
+            if self.needle.frozen:
+                return
+            near, moved = self._needle_near_ports()
+            if near and (moved or not self._phantom_tracking):
+                self.phantom.update(self.needle.pose(), t)
+                self._phantom_tracking = True
+            elif not near and self._phantom_tracking:
+                # Far from every port nothing can cross or engage; start afresh when back.
+                self.phantom.reset_tracking()
+                self.phantom.strain = {}
+                self._phantom_tracking = False
+
+    def _needle_near_ports(self) -> tuple[bool, bool]:
+        """(near, moved): whether the needle is close enough to a port to cross or strain it,
+        and whether it moved since the last call (a needle at rest changes no record)."""
+        com, quat = pb.getBasePositionAndOrientation(self.needle.id, physicsClientId=self.client)
+        state = np.r_[com, quat]
+        moved = self._last_needle_state is None or bool(
+            np.abs(state - self._last_needle_state).max() > 1e-9
+        )
+        self._last_needle_state = state
+        d2 = np.sum((self._port_positions - state[:3]) ** 2, axis=1)
+        return bool(d2.min() < PORT_WATCH_RADIUS**2), moved
 
     # ------------------------------------------------------------------ helpers
     def segmentation_masks(self, eye: str = "left") -> dict[str, np.ndarray]:

@@ -3,6 +3,7 @@
 import numpy as np
 import pytest
 
+from suture_bt.geometry.phantom import TISSUE_TOP_Z
 from suture_bt.interfaces import WorldInterface
 from suture_bt.sim.ground_truth import GroundTruth
 from suture_bt.sim.scene import scene_from_dict
@@ -163,7 +164,7 @@ def test_handover_grasp_geometry_and_release():
         assert gt.needle_holder() is None
 
 
-def test_released_needle_falls():
+def test_released_needle_falls_and_rests_on_the_tissue():
     with World.from_scene(_held_scene(), with_camera=False) as w:
         gt = GroundTruth(w)
         z0 = gt.needle_pose()[2, 3]
@@ -171,3 +172,36 @@ def test_released_needle_falls():
         w.step(0.1)
         assert gt.needle_holder() is None
         assert gt.needle_pose()[2, 3] < z0 - 0.01  # free fall: ~ g t² / 2 = 49 mm
+        w.step(1.4)
+        assert w.needle.is_resting()
+        pts = w.task.needle.centerline(40) @ gt.needle_pose()[:3, :3].T + gt.needle_pose()[:3, 3]
+        # It lies on the tissue: the lowest wire point at the surface, nothing inside it.
+        assert pts[:, 2].min() == pytest.approx(TISSUE_TOP_Z + 0.00036, abs=0.0004)
+        assert not w.phantom.inserted(gt.needle_pose())
+
+
+def test_released_inserted_needle_stays():
+    with World.from_scene(_held_scene(), with_camera=False) as w:
+        gt = GroundTruth(w)
+        goal = gt.tip_pose_world("psm2")
+        goal[2, 3] -= 0.028  # push the hanging needle into the tissue block
+        w.psm2.move_cp(invert(w.psm2.base_frame()) @ goal)
+        while w.psm2.is_busy():
+            w.step(0.1)
+        T_in = gt.needle_pose()
+        assert w.phantom.inserted(T_in)
+        w.psm2.jaw.open()
+        w.step(0.5)
+        assert gt.needle_holder() is None and w.needle.frozen
+        assert np.allclose(gt.needle_pose(), T_in, atol=1e-6)
+
+
+def test_resting_start_follows_a_moved_phantom():
+    scene = scene_from_dict({"phantom": {"position": [0.01, 0.005, 0.002], "rpy": [0.0, 0.0, 0.4]}})
+    with World.from_scene(scene, with_camera=False) as w:
+        w.step(0.3)
+        T = GroundTruth(w).needle_pose()
+        expected = w.task.phantom.T_world_phantom[:3, :3] @ (-0.0208, 0.0562, 0.0717)
+        expected += w.task.phantom.T_world_phantom[:3, 3]
+        assert np.linalg.norm(T[:3, 3] - expected) < 1e-3
+        assert w.needle.is_resting()
