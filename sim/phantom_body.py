@@ -5,10 +5,11 @@ whose top is at ``TISSUE_TOP_Z`` and, for each port pair, a ridge segment whose 
 the planes through that pair's entry and exit ports with the ports' outward normals (pitched
 ∓46.1°). The flanks are thin box slabs (boxes render and collide exactly; the interior of the
 ridge is never seen). Each port is marked by a dark 5 × 5 mm square (a thin box without
-collision) lying on its flank. A large dark floor 3 cm below stands for the body cavity.
+collision) lying on its flank. A large dark floor 3 cm below (a separate body, ``floor_id``,
+not tissue) stands for the body cavity.
 
-Links of the body: ``slab_links`` (ridge), ``mark_links[port name]``, ``floor_link``; the
-base link (−1) is the flat block.
+Links of the phantom body ``id``: the base link (−1) is the flat block, ``slab_links`` the
+ridge, ``mark_links[port name]`` the port squares.
 
 Bookkeeping (:meth:`PhantomBody.update`, once per physics step): for every port, each needle
 tip crossing of the port plane within ``CAPTURE_RADIUS`` of the port, with the SRC sign
@@ -130,6 +131,7 @@ class PhantomBody:
         load_renderer(client)  # bodies created before the EGL plugin loads are never drawn
         self._segments = self._build_segments()
         self.id, self.slab_links, self.mark_links = self._create_body()
+        self.floor_id = self._create_floor()
         self.crossings: list[Crossing] = []
         self.strain: dict[str, Strain] = {}
         self.max_strain: dict[str, Strain] = {}
@@ -214,19 +216,6 @@ class PhantomBody:
                     physicsClientId=c,
                 )  # fmt: skip
             )
-        self.floor_link = len(frames)
-        floor_half = [FLOOR_HALF_SIZE, FLOOR_HALF_SIZE, 0.001]
-        frames.append(make_transform(position=(0.0, 0.0, TISSUE_TOP_Z - FLOOR_DEPTH)))
-        cols.append(p.createCollisionShape(p.GEOM_BOX, halfExtents=floor_half, physicsClientId=c))
-        vis.append(
-            p.createVisualShape(
-                p.GEOM_BOX,
-                halfExtents=floor_half,
-                rgbaColor=list(FLOOR_RGBA),
-                specularColor=[0.0, 0.0, 0.0],
-                physicsClientId=c,
-            )  # fmt: skip
-        )
         Tw = self.phantom.T_world_phantom
         n = len(frames)
         body = p.createMultiBody(
@@ -251,6 +240,27 @@ class PhantomBody:
         for link in range(n):
             p.changeDynamics(body, link, lateralFriction=1.0, physicsClientId=c)
         return body, list(range(n_slabs)), mark_links
+
+    def _create_floor(self) -> int:
+        """A separate static body: large dark floor FLOOR_DEPTH below the tissue top."""
+        c = self.client
+        half = [FLOOR_HALF_SIZE, FLOOR_HALF_SIZE, 0.001]
+        T = self.phantom.T_world_phantom @ make_transform(
+            position=(0.0, 0.0, TISSUE_TOP_Z - FLOOR_DEPTH)
+        )
+        col = p.createCollisionShape(p.GEOM_BOX, halfExtents=half, physicsClientId=c)
+        vis = p.createVisualShape(
+            p.GEOM_BOX, halfExtents=half, rgbaColor=list(FLOOR_RGBA), specularColor=[0, 0, 0],
+            physicsClientId=c,
+        )  # fmt: skip
+        return p.createMultiBody(
+            baseMass=0.0,
+            baseCollisionShapeIndex=col,
+            baseVisualShapeIndex=vis,
+            basePosition=list(T[:3, 3]),
+            baseOrientation=list(quat_xyzw(T[:3, :3])),
+            physicsClientId=c,
+        )
 
     def inside_tissue(self, points_world: np.ndarray) -> np.ndarray:
         """Which world points lie inside the tissue (block or ridge solid), boolean per point."""

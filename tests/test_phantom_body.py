@@ -122,6 +122,7 @@ def test_geometry_and_segmentation(client):
         u, v = np.rint(L.project(point)[0]).astype(int)
         assert ids[v, u] == body_id
     assert r.mask(body.id).sum() > 0.3 * ids.size  # tissue fills much of the view
+    assert (ids == body.floor_id).any() and not (ids == -1).any()  # the floor is background
     mark = phantom.port("entry3")
     u, v = np.rint(L.project(mark.position)[0]).astype(int)
     assert r.link_ids[v, u] == body.mark_links["entry3"] and ids[v, u] == body.id
