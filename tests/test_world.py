@@ -82,7 +82,8 @@ def test_worlds_coexist_and_close(world):
 
 
 def test_world_interface_and_base_frames(world):
-    assert isinstance(world, WorldInterface) or world.camera is None
+    assert isinstance(world, WorldInterface)
+    assert (world.camera.width, world.camera.height) == (1920, 1080)
     assert np.allclose(world.psm1.base_frame()[:3, 3], (0.1, 0.1346, 0.135))
     assert np.allclose(world.psm2.base_frame(), psm_base_frame("psm2"))
 
