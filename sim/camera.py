@@ -249,7 +249,12 @@ class StereoEndoscope:
     def _sensor(self, rgb: np.ndarray) -> np.ndarray:
         if self.brightness == 1.0 and self.noise_std == 0.0:
             return rgb
-        img = rgb.astype(np.float32) * self.brightness
+        img = rgb.astype(np.float32)
+        img *= self.brightness
         if self.noise_std > 0:
-            img += self.rng.normal(0.0, self.noise_std, img.shape).astype(np.float32)
-        return np.clip(np.rint(img), 0, 255).astype(np.uint8)
+            noise = self.rng.standard_normal(img.shape, dtype=np.float32)
+            noise *= self.noise_std
+            img += noise
+        np.rint(img, out=img)
+        np.clip(img, 0, 255, out=img)
+        return img.astype(np.uint8)
