@@ -64,6 +64,11 @@ class PIGains:
       ramp lags by (Kd/Kp)·q̇; feeding that forward keeps the integrator from soaking up the lag,
       which it would otherwise release as an overshoot when the motion stops — and stiction then
       holds the joint on the wrong side (steady-state error 10-20× larger without it).
+    * ``direction_memory``: one integrator per direction of motion (see
+      :meth:`PIServo._switch_direction`), because the friction it cancels flips with the
+      direction; ``direction_deadband`` (0.002 rad/s, 0.1 mm/s) must be below the slowest
+      joint speeds of a needle sweep, or a slowly starting joint waits for its integrator
+      (tissue strain in a simulated insertion: 0.54 mm without the memory, 0.02 mm with it).
     * ``max_correction`` (0.15 rad, 5 mm) and ``integrator_limit`` bound how far the loop may push
       beyond the desired value: several times the expected error (1.5°, 0.1 mm), so a blocked
       arm cannot make it drive a joint far away.
@@ -78,11 +83,15 @@ class PIGains:
         default_factory=lambda: np.array([0.15, 0.15, 0.005, 0.15, 0.15, 0.15])
     )
     velocity_feedforward: float = LOW_LEVEL_LAG
+    direction_memory: bool = True
+    direction_deadband: np.ndarray = field(
+        default_factory=lambda: np.array([0.002, 0.002, 0.0001, 0.002, 0.002, 0.002])
+    )
 
     def __post_init__(self):
         if not np.isfinite(self.velocity_feedforward) or self.velocity_feedforward < 0:
             raise ValueError("velocity_feedforward must be a non-negative time constant (s)")
-        for name in ("kp", "ki", "max_correction", "integrator_limit"):
+        for name in ("kp", "ki", "max_correction", "integrator_limit", "direction_deadband"):
             object.__setattr__(self, name, _per_joint(getattr(self, name), name))
 
 
@@ -114,6 +123,10 @@ class PIServo:
         self.estimate = np.zeros(NUM_JOINTS)
         self.error = np.zeros(NUM_JOINTS)
         self.integrator = np.zeros(NUM_JOINTS)
+        #: Direction of the desired motion per joint (+1, −1; 0 before the first motion).
+        self.direction = np.zeros(NUM_JOINTS, dtype=int)
+        self._memory = np.zeros((2, NUM_JOINTS))  # integrator per direction: [−, +]
+        self._learned = np.zeros((2, NUM_JOINTS), dtype=bool)
         self.correction = np.zeros(NUM_JOINTS)
         self.output = np.zeros(NUM_JOINTS)
         self.commanded = np.zeros(NUM_JOINTS)
@@ -144,6 +157,9 @@ class PIServo:
     def reset(self, hold_current: bool = True) -> None:
         """Zero the integrator; optionally make the current estimate the desired value."""
         self.integrator[:] = 0.0
+        self.direction[:] = 0
+        self._memory[:] = 0.0
+        self._learned[:] = False
         self._previous_desired = None
         self.desired = self.estimated_jp() if hold_current else None
 
@@ -164,6 +180,8 @@ class PIServo:
         e = q_d - self.estimate
         self.error = e
         if self.enabled:
+            if g.direction_memory:
+                self._switch_direction(self.desired_velocity)
             integ = np.clip(
                 self.integrator + g.ki * e * self.dt, -g.integrator_limit, g.integrator_limit
             )
@@ -184,6 +202,32 @@ class PIServo:
         self.commanded = np.clip(command_for_true(out, self.offset_estimate), lo, hi)
         self.arm.servo_jp(self.commanded)
         self.updates += 1
+
+    def _switch_direction(self, velocity: np.ndarray) -> None:
+        """Swap in the integrator learned for the new direction of motion, per joint.
+
+        Coulomb friction flips sign with the direction of motion, so the integral term that
+        holds a joint against friction (and load) while it moves one way is wrong by twice the
+        friction the other way; integrating that difference away at every reversal is what
+        makes a PI loop lag on a stiction plant. Each joint keeps one integrator per direction
+        of its desired motion (ignoring speeds inside ``direction_deadband``); a direction not
+        yet seen starts from the mirror image of the other one (friction-dominated guess).
+        """
+        new = np.where(
+            velocity > self.gains.direction_deadband,
+            1,
+            np.where(velocity < -self.gains.direction_deadband, -1, self.direction),
+        )
+        for j in np.nonzero((new != self.direction) & (new != 0))[0]:
+            old, nxt = self.direction[j], new[j]
+            if old != 0:
+                self._memory[(old + 1) // 2, j] = self.integrator[j]
+                self._learned[(old + 1) // 2, j] = True
+                k = (nxt + 1) // 2
+                self.integrator[j] = (
+                    self._memory[k, j] if self._learned[k, j] else -self.integrator[j]
+                )
+        self.direction = new
 
     def attach(self, add_periodic: Callable[[float, Callable[[float], None]], object]) -> object:
         """Register :meth:`update` at this rate: ``servo.attach(world.add_periodic)``."""
