@@ -37,6 +37,8 @@ BLOCK_THICKNESS = 0.01
 #: Ridge flank slabs: thickness, and how far they reach below the block top (hidden).
 SLAB_THICKNESS = 0.002
 SLAB_SINK = 0.002
+#: Height step of the boxes that fill the ridge behind the slabs.
+FILL_LAYER = 0.001
 #: How far the ridge runs past the outer pairs (m).
 RIDGE_END_MARGIN = 0.012
 MARK_THICKNESS = 0.0002
@@ -109,6 +111,25 @@ def _flank_slab(port: Port, peak_x: float, y0: float, y1: float) -> tuple[np.nda
     return make_transform(R, centre), half
 
 
+def _flank_x(port: Port, z: float) -> float:
+    """x where a flank plane (it contains the y direction) is at height z."""
+    n, p0 = port.T[:3, 2], port.T[:3, 3]
+    return float(p0[0] - n[2] * (z - p0[2]) / n[0])
+
+
+def _fill_layers(entry: Port, exit_: Port, peak_x: float, y0: float, y1: float):
+    """Nested upright boxes inside the ridge, so its ends look solid (stairs hidden by slabs)."""
+    peak_z = entry.T[2, 3] - entry.T[0, 2] * (peak_x - entry.T[0, 3]) / entry.T[2, 2]
+    bottom = TISSUE_TOP_Z - SLAB_SINK
+    out = []
+    for z in np.arange(TISSUE_TOP_Z + FILL_LAYER, peak_z - SLAB_THICKNESS, FILL_LAYER):
+        xe, xx = _flank_x(entry, z), _flank_x(exit_, z)
+        centre = ((xe + xx) / 2, (y0 + y1) / 2, (bottom + z) / 2)
+        half = np.array([(xx - xe) / 2, (y1 - y0) / 2, (z - bottom) / 2])
+        out.append((make_transform(position=centre), half))
+    return out
+
+
 def _peak_x(entry: Port, exit_: Port) -> float:
     """x of the line where the two flank planes meet (they both contain the y direction)."""
     ne, nx = entry.T[:3, 2], exit_.T[:3, 2]
@@ -161,6 +182,9 @@ class PhantomBody:
             peak = _peak_x(entry, exit_)
             for port in (entry, exit_):
                 T, half = _flank_slab(port, peak, y0, y1)
+                seg.slabs.append(T)
+                seg.half_extents.append(half)
+            for T, half in _fill_layers(entry, exit_, peak, y0, y1):
                 seg.slabs.append(T)
                 seg.half_extents.append(half)
             segments.append(seg)
