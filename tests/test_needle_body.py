@@ -125,4 +125,5 @@ def test_released_inserted_needle_stays_frozen(client):
     needle.unfreeze()  # tissue lets go: no contact is forced while it is still inside
     assert needle.state == "free"
     step(client, 300)
-    assert needle.pose()[2, 3] < T[2, 3] - 0.05  # it falls (through, collisions still off)
+    # It falls through the tissue (collisions stay off while inside) onto the floor below.
+    assert needle.pose()[2, 3] < T[2, 3] - 0.005
