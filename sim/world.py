@@ -214,13 +214,16 @@ class World:
     def in_jaw_grasp_pose(self) -> np.ndarray:
         """Needle pose in the tip frame for a grasp at the scene's arc angle.
 
-        The jaws are orthogonal to the needle plane (needle z = tip z), the wire runs along the
-        tip x axis between the blades (which close along tip y), ``GRASP_DEPTH`` behind the tip.
+        The jaws are orthogonal to the needle plane (needle z = −tip z), the wire runs along the
+        tip x axis between the blades (which close along tip y; direction of travel of the tip =
+        −tip x, arc centre toward +tip y), ``GRASP_DEPTH`` behind the tip. With this hand, PSM2
+        can drive the needle along the planned arc of every SRC port pair.
         """
         a = np.deg2rad(self.scene.needle.grasp_arc_angle_deg)
         tangent = np.array([np.sin(a), -np.cos(a), 0.0])
         radial = np.array([np.cos(a), np.sin(a), 0.0])
-        R = np.stack([tangent, radial, [0.0, 0.0, 1.0]])  # rows: needle axes -> tip axes
+        # Rows: tip axes x, y, z expressed in the needle frame (R maps needle -> tip).
+        R = np.stack([-tangent, radial, [0.0, 0.0, -1.0]])
         grasp_point = np.array([0.0, 0.0, -GRASP_DEPTH])
         return make_transform(R, grasp_point - R @ self.task.needle.point_at(a))
 

@@ -110,7 +110,7 @@ def _wire_grasp_goal(T_world_needle, model, arc_deg):
     a = np.deg2rad(arc_deg)
     goal = np.eye(4)
     goal[:3, 0] = -(T_world_needle[:3, :3] @ model.tangent_at(a))
-    goal[:3, 2] = -T_world_needle[:3, 2]
+    goal[:3, 2] = T_world_needle[:3, 2]
     goal[:3, 1] = np.cross(goal[:3, 2], goal[:3, 0])
     goal[:3, 3] = T_world_needle[:3, :3] @ model.point_at(a) + T_world_needle[:3, 3]
     return goal
@@ -206,3 +206,33 @@ def test_resting_start_follows_a_moved_phantom():
         expected += w.task.phantom.T_world_phantom[:3, 3]
         assert np.linalg.norm(T[:3, 3] - expected) < 1e-3
         assert w.needle.is_resting()
+
+
+def test_a_throw_records_src_crossings_and_tip_out():
+    """PSM2 drives the held needle along the planned arc of pair 1 (ideal servo, no offset)."""
+    from suture_bt.planning.needle_arc import gripper_poses, in_base, plan_needle_arc
+
+    with World.from_scene(_held_scene(), with_camera=False) as w:
+        gt = GroundTruth(w)
+        entry, exit_ = w.task.phantom.pair(1)
+        arc = plan_needle_arc(entry, exit_, w.task.needle)
+        T_tip_needle = invert(gt.tip_pose_world("psm2")) @ gt.needle_pose()
+        needle_poses = arc.sweep(-0.3, arc.insert_end_angle, angular_speed=1.0, dt=0.01)
+        goals = in_base(gripper_poses(needle_poses, T_tip_needle), w.psm2.base_frame())
+        w.psm2.move_cp(goals.poses[0])
+        while w.psm2.is_busy():
+            w.step(0.1)
+        previous = 0.0
+        for t, goal in zip(goals.times, goals.poses, strict=True):
+            w.step(t - previous)
+            previous = t
+            w.psm2.servo_cp(goal)
+        w.step(0.01)
+        crossings = gt.port_crossings()
+        assert [(c.port, c.src_direction) for c in crossings] == [
+            ("entry1", True),
+            ("exit1", True),
+        ]
+        assert all(c.lateral < 1e-4 for c in crossings)
+        assert crossings[1].tip_out >= 0.005
+        assert set(gt.phantom_state().strain) == {"entry1", "exit1"}
