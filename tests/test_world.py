@@ -236,3 +236,20 @@ def test_a_throw_records_src_crossings_and_tip_out():
         assert all(c.lateral < 1e-4 for c in crossings)
         assert crossings[1].tip_out >= 0.005
         assert set(gt.phantom_state().strain) == {"entry1", "exit1"}
+
+
+def test_explicit_needle_pose_and_random_offsets_from_the_scene():
+    scene = scene_from_dict(
+        {
+            "seed": 11,
+            "needle": {"start": "pose", "position": [0.0, 0.0, 0.09], "rpy": [0.3, 0.0, 0.2]},
+            "arms": {"psm1": {"joint_offset": "random"}, "psm2": {"joint_offset": "random"}},
+        }
+    )
+    with World.from_scene(scene, with_camera=False) as w:
+        gt = GroundTruth(w)
+        assert np.allclose(gt.needle_pose(), scene.needle.T_world_needle, atol=1e-9)
+        assert np.array_equal(gt.joint_offset("psm1"), scene.joint_offset("psm1"))
+        assert not np.array_equal(gt.joint_offset("psm1"), gt.joint_offset("psm2"))
+        # The arms start where the scene says, as far as their encoders can tell.
+        assert np.allclose(w.psm2.measured_jp(), scene.arms["psm2"].initial_jp)
