@@ -118,6 +118,14 @@ class World:
     def __init__(self, scene: SceneConfig | None = None, with_camera: bool = True):
         self.scene = scene or default_scene()
         self.client = pb.connect(pb.DIRECT)
+        self._closed = False
+        try:
+            self._build(with_camera)
+        except BaseException:
+            self.close()  # never leak a pybullet client on a failed build
+            raise
+
+    def _build(self, with_camera: bool) -> None:
         if with_camera:
             # Bodies created before the EGL plugin loads are never drawn by it.
             load_renderer(self.client)
@@ -130,7 +138,6 @@ class World:
         self._periodics: list[_Periodic] = []
         self._next_order = 0
         self._target_time = 0.0
-        self._closed = False
         sv = self.scene.servo
         params = ServoParams(
             sv.bandwidth_hz,
