@@ -209,10 +209,13 @@ class PhantomBody:
         )  # fmt: skip
         frames, cols, vis = [], [], []
         for seg in self._segments:
-            for T, half in zip(seg.slabs, seg.half_extents, strict=True):
+            for k, (T, half) in enumerate(zip(seg.slabs, seg.half_extents, strict=True)):
                 frames.append(T)
+                collides = k < 2  # the two flank slabs; the fill behind them is visual only
                 cols.append(
                     p.createCollisionShape(p.GEOM_BOX, halfExtents=list(half), physicsClientId=c)
+                    if collides
+                    else -1
                 )
                 vis.append(
                     p.createVisualShape(
