@@ -34,6 +34,9 @@ NEAR = 0.005
 FAR = 2.0
 #: Rotation from an OpenGL-style eye frame (x right, y up, z backward) to OpenCV (y down, z fwd).
 R_GL_CV = np.diag([1.0, -1.0, -1.0])
+#: TinyRenderer draws everything about (+0.5, −0.5) px off the pixel-centre convention
+#: (measured; DESIGN.md §5); its frustum is shifted by this much to compensate.
+TINY_PIXEL_SHIFT = (0.5, -0.5)
 #: RGB shown where no object is hit (the dark body cavity rather than pybullet's grey-blue).
 BACKGROUND_RGB = (24, 14, 14)
 #: Direction towards the light, world frame. Overhead: oblique directions make the EGL
@@ -142,6 +145,7 @@ def render_view(
     if light_direction is None:
         light_direction = LIGHT_DIRECTION_WORLD
     max_w, max_h = (MAX_TILE_WIDTH, MAX_TILE_HEIGHT) if kind == "egl" else (cam.width, cam.height)
+    du, dv = (0.0, 0.0) if kind == "egl" else TINY_PIXEL_SHIFT
     W, H = cam.width, cam.height
     rgb = np.empty((H, W, 3), np.uint8)
     zbuf = np.empty((H, W), np.float32)
@@ -156,10 +160,10 @@ def render_view(
     for r0, r1 in _tiles(H, max_h):
         for c0, c1 in _tiles(W, max_w):
             # Tile edges (pixel centre ± 0.5) on the near plane; rows run downwards in OpenCV.
-            left = NEAR * (c0 - 0.5 - cam.cx) / cam.fx
-            right = NEAR * (c1 - 0.5 - cam.cx) / cam.fx
-            top = NEAR * (cam.cy - (r0 - 0.5)) / cam.fy
-            bottom = NEAR * (cam.cy - (r1 - 0.5)) / cam.fy
+            left = NEAR * (c0 - 0.5 + du - cam.cx) / cam.fx
+            right = NEAR * (c1 - 0.5 + du - cam.cx) / cam.fx
+            top = NEAR * (cam.cy - (r0 - 0.5 + dv)) / cam.fy
+            bottom = NEAR * (cam.cy - (r1 - 0.5 + dv)) / cam.fy
             proj = _gl_matrix(_frustum(left, right, bottom, top))
             w, h = c1 - c0, r1 - r0
             _, _, img, depth, segm = p.getCameraImage(

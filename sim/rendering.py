@@ -1,10 +1,11 @@
 """Per-client renderer choice: the EGL plugin when it loads, TinyRenderer otherwise.
 
 EGL (software Mesa on a CPU) is 2-4× faster than TinyRenderer and follows the pixel-centre
-convention exactly; it renders at most 1024×768 internally (DESIGN.md §5), so callers render
-larger images in tiles (see :mod:`suture_bt.sim.camera`). Bodies created in a client before
-the plugin is loaded are never drawn by it: call :func:`load_renderer` right after connecting
-(the needle and phantom bodies do so themselves).
+convention exactly (TinyRenderer draws about half a pixel off; the camera compensates). EGL
+renders at most 1024×768 internally (DESIGN.md §5), so callers render larger images in tiles
+(see :mod:`suture_bt.sim.camera`). Bodies created in a client before the plugin is loaded are
+never drawn by it: call :func:`load_renderer` right after connecting (the needle and phantom
+bodies do so themselves).
 """
 
 from __future__ import annotations
