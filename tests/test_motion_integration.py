@@ -1,0 +1,171 @@
+"""Motion stack in the real World: PI servo + offset compensation + Cartesian moves to the ports,
+and planned needle insertions scored by the phantom's crossing records (issue 3, "Done when").
+
+Ground truth is used here only to set Δq̂ to the true offset and to read the true tip/needle.
+"""
+
+import numpy as np
+import pytest
+
+from suture_bt.control import PIServo
+from suture_bt.planning import (
+    CartesianMove,
+    MoveStatus,
+    PoseSequenceMove,
+    gripper_poses,
+    in_base,
+    plan_needle_arc,
+    to_base,
+)
+from suture_bt.sim.ground_truth import GroundTruth
+from suture_bt.sim.scene import scene_from_dict
+from suture_bt.sim.world import World
+
+#: PSM2 (at −x) serves the entries, PSM1 (at +x) the exits.
+ARM_FOR_KIND = {"entry": "psm2", "exit": "psm1"}
+PI_DT = 0.005
+
+
+def port_goal(port) -> np.ndarray:
+    """Tip pose at a port: z into the tissue, x along the phantom's ridge (reachable)."""
+    z = -port.normal
+    x = port.T[:3, 1] - np.dot(port.T[:3, 1], z) * z
+    x /= np.linalg.norm(x)
+    T = np.eye(4)
+    T[:3, 0], T[:3, 1], T[:3, 2], T[:3, 3] = x, np.cross(z, x), z, port.position
+    return T
+
+
+def drive(world, moves, settle: float, limit: float = 20.0) -> dict[str, MoveStatus]:
+    """Step moves and world in PI periods until all moves end, then hold for ``settle`` s."""
+    status = {}
+    t = 0.0
+    while t < limit:
+        status = {name: m.step(PI_DT) for name, m in moves.items()}
+        world.step(PI_DT)
+        t += PI_DT
+        if all(s.done or s.failed for s in status.values()):
+            break
+    world.step(settle)
+    return status
+
+
+@pytest.mark.parametrize("condition", ["B", "C"])
+def test_true_tip_reaches_every_port_with_the_true_offset_estimate(condition):
+    scene = scene_from_dict(
+        {
+            "servo": {"error_model": True},
+            "arms": {"psm1": {"joint_offset": condition}, "psm2": {"joint_offset": condition}},
+        }
+    )
+    with World.from_scene(scene, with_camera=False) as world:
+        truth = GroundTruth(world)
+        servos = {}
+        for name in ("psm1", "psm2"):
+            dq = truth.joint_offset(name)[:3]
+            assert np.linalg.norm(dq) > 1e-3  # the condition is really applied
+            servos[name] = PIServo(world.arms[name], offset_estimate=dq)
+            servos[name].reset()
+            servos[name].attach(world.add_periodic)
+        errors = []
+        phantom = world.task.phantom
+        for pair in range(1, phantom.num_pairs + 1):
+            ports = dict(zip(("psm2", "psm1"), phantom.pair(pair), strict=True))
+            moves = {}
+            for name, port in ports.items():
+                goal = to_base(port_goal(port), world.arms[name].base_frame())
+                moves[name] = CartesianMove(servos[name], goal, v_lin=0.05, a_lin=0.4)
+                st = moves[name].start()
+                assert not st.failed, st.reason
+            status = drive(world, moves, settle=0.4)
+            assert all(s.done for s in status.values())
+            for name, port in ports.items():
+                tip = truth.tip_pose_world(name)
+                errors.append(np.linalg.norm(tip[:3, 3] - port.position))
+        assert max(errors) < 0.3e-3, np.round(np.array(errors) * 1e3, 3)
+
+
+# ---------------------------------------------------------------- needle insertion
+MOVED_PHANTOM = {"position": [0.03, -0.02, 0.0], "rpy": [0.0, 0.0, float(np.deg2rad(15.0))]}
+GRASP_ARC_DEG = 155.0
+#: Tip starts this far (arc length) before the entry, and the approach comes down to it along
+#: the entry normal from this height.
+PRE_ARC, LIFT = 0.006, 0.010
+#: Needle sweep speed limits (rad/s, rad/s²): the tip moves at up to 6 mm/s.
+SWEEP = {"angular_speed": 0.6, "angular_acc": 2.4}
+
+
+def phantom_recorder(world):
+    """The world's phantom bookkeeping, or (until the world wires it) one updated per step."""
+    if world.phantom is not None:
+        return world.phantom
+    from suture_bt.sim.phantom_body import PhantomBody
+
+    truth = GroundTruth(world)
+    body = PhantomBody(world.client, world.task.phantom, world.task.needle)
+    world.add_periodic(world.dt, lambda t: body.update(truth.needle_pose(), t))
+    return body
+
+
+def throw_passes(recorder, pair: int) -> tuple[bool, str]:
+    """SRC throw rule (DESIGN.md §5) on the recorded crossings of one pair, plus strain."""
+    xs = [c for c in recorder.crossings if c.pair == pair]
+    entry = [c for c in xs if c.kind == "entry" and c.src_direction]
+    exit_ = [c for c in xs if c.kind == "exit" and c.src_direction]
+    if not entry or not exit_:
+        return False, f"crossings: {[(c.port, c.inward) for c in recorder.crossings]}"
+    e, x = entry[0], exit_[0]
+    strain = max((s.circle for s in recorder.max_strain.values()), default=0.0)
+    msg = (
+        f"entry lateral {e.lateral * 1e3:.2f} mm, exit lateral {x.lateral * 1e3:.2f} mm, "
+        f"tip out {x.tip_out * 1e3:.2f} mm, strain {strain * 1e3:.3f} mm"
+    )
+    ok = (
+        e.t < x.t
+        and e.lateral <= 2.5e-3
+        and x.lateral <= 2.5e-3
+        and x.tip_out >= 5e-3
+        and strain <= 0.5e-3
+    )
+    return ok, msg
+
+
+@pytest.mark.parametrize("phantom", ["default", "moved"])
+@pytest.mark.parametrize("pair", [1, 2, 3, 4])
+def test_planned_insertion_passes_the_src_throw_rule(phantom, pair):
+    overrides = {
+        "servo": {"error_model": True},
+        "needle": {"start": "in_psm2_jaw", "grasp_arc_angle_deg": GRASP_ARC_DEG},
+    }
+    if phantom == "moved":
+        overrides["phantom"] = MOVED_PHANTOM
+    with World.from_scene(scene_from_dict(overrides), with_camera=False) as world:
+        truth = GroundTruth(world)
+        recorder = phantom_recorder(world)
+        psm2 = world.psm2
+        servo = PIServo(psm2)
+        servo.reset()
+        servo.attach(world.add_periodic)
+        # The true needle-in-gripper transform (ground truth, test only).
+        T_gn = np.linalg.inv(truth.tip_pose_world("psm2")) @ truth.needle_pose()
+        entry, exit_ = world.task.phantom.pair(pair)
+        arc = plan_needle_arc(entry, exit_, world.task.needle)
+        arc.check_grasp(T_gn)
+        T_gn_inv = np.linalg.inv(T_gn)
+        base = psm2.base_frame()
+        phi0 = -PRE_ARC / arc.needle.radius
+        T_pre = arc.needle_pose(phi0) @ T_gn_inv
+        T_lift = T_pre.copy()
+        T_lift[:3, 3] += LIFT * entry.normal
+        goals = [to_base(T_lift, base), to_base(T_pre, base)]
+        approach = CartesianMove(servo, goals, v_lin=0.08, a_lin=0.4, v_ang=1.2, a_ang=4.0)
+        st = approach.start()
+        assert not st.failed, st.reason
+        assert drive(world, {"psm2": approach}, settle=0.3)["psm2"].done
+        insertion = in_base(gripper_poses(arc.insertion(start_angle=phi0, **SWEEP), T_gn), base)
+        move = PoseSequenceMove(servo, insertion.times, insertion.poses)
+        st = move.start()
+        assert not st.failed, st.reason
+        assert drive(world, {"psm2": move}, settle=0.2)["psm2"].done
+        ok, msg = throw_passes(recorder, pair)
+        assert ok, msg
