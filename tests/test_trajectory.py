@@ -164,3 +164,18 @@ def test_pose_sequence_follows_timed_poses_and_to_base_round_trips():
     np.testing.assert_allclose(invert(base) @ base, np.eye(4), atol=1e-12)
     with pytest.raises(ValueError, match="increase"):
         PoseSequenceMove(sink, [0.0, 0.0], poses[:2])
+
+
+def test_numpy_slerp_matches_scipy_including_near_opposite_quaternions():
+    from scipy.spatial.transform import Rotation, Slerp
+
+    from suture_bt.planning.trajectory import _slerp_matrix
+
+    rng = np.random.default_rng(5)
+    pairs = [Rotation.random(2, random_state=int(rng.integers(1 << 30))) for _ in range(100)]
+    pairs.append(Rotation.from_rotvec([[0, 0, 0], [0, 0, np.pi - 1e-6]]))
+    for r in pairs:
+        s = float(rng.uniform())
+        ref = Slerp([0.0, 1.0], r)([s]).as_matrix()[0]
+        qa, qb = r.as_quat()
+        np.testing.assert_allclose(_slerp_matrix(qa, -qb, s), ref, atol=1e-8)

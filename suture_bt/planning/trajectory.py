@@ -15,7 +15,7 @@ from dataclasses import dataclass
 from typing import Protocol
 
 import numpy as np
-from scipy.spatial.transform import Rotation, Slerp
+from scipy.spatial.transform import Rotation
 
 from suture_bt.kinematics import (
     NUM_JOINTS,
@@ -189,23 +189,51 @@ def _pose_distance(Ta: np.ndarray, Tb: np.ndarray) -> tuple[float, float]:
     return lin, ang
 
 
+def _quat(R: np.ndarray) -> np.ndarray:
+    return Rotation.from_matrix(R).as_quat()  # (x, y, z, w), robust near 180°
+
+
+def _slerp_matrix(qa: np.ndarray, qb: np.ndarray, s: float) -> np.ndarray:
+    """Rotation matrix at fraction s of the shortest arc from quaternion qa to qb (numpy)."""
+    d = float(np.dot(qa, qb))
+    if d < 0.0:
+        qb, d = -qb, -d
+    if d > 0.9995:
+        q = qa + s * (qb - qa)
+    else:
+        th = np.arccos(min(d, 1.0))
+        q = (np.sin((1 - s) * th) * qa + np.sin(s * th) * qb) / np.sin(th)
+    x, y, z, w = q / np.linalg.norm(q)
+    return np.array(
+        [
+            [1 - 2 * (y * y + z * z), 2 * (x * y - z * w), 2 * (x * z + y * w)],
+            [2 * (x * y + z * w), 1 - 2 * (x * x + z * z), 2 * (y * z - x * w)],
+            [2 * (x * z - y * w), 2 * (y * z + x * w), 1 - 2 * (x * x + y * y)],
+        ]
+    )
+
+
+def _interpolate(Ta: np.ndarray, Tb: np.ndarray, qa: np.ndarray, qb: np.ndarray, s: float):
+    """Pose at fraction s: straight-line position, SLERP orientation."""
+    s = min(max(s, 0.0), 1.0)
+    T = np.eye(4)
+    T[:3, :3] = _slerp_matrix(qa, qb, s)
+    T[:3, 3] = (1 - s) * Ta[:3, 3] + s * Tb[:3, 3]
+    return T
+
+
 @dataclass
 class _CartSegment:
     T_a: np.ndarray
     T_b: np.ndarray
-    slerp: Slerp
     profile: Profile
     t0: float
 
+    def __post_init__(self):
+        self.q_a, self.q_b = _quat(self.T_a[:3, :3]), _quat(self.T_b[:3, :3])
+
     def pose(self, s: float) -> np.ndarray:
-        T = np.eye(4)
-        T[:3, :3] = self.slerp([min(max(s, 0.0), 1.0)]).as_matrix()[0]
-        T[:3, 3] = (1 - s) * self.T_a[:3, 3] + s * self.T_b[:3, 3]
-        return T
-
-
-def _slerp(Ta: np.ndarray, Tb: np.ndarray) -> Slerp:
-    return Slerp([0.0, 1.0], Rotation.from_matrix(np.stack([Ta[:3, :3], Tb[:3, :3]])))
+        return _interpolate(self.T_a, self.T_b, self.q_a, self.q_b, s)
 
 
 class CartesianMove(_Move):
@@ -257,7 +285,6 @@ class CartesianMove(_Move):
             seg = _CartSegment(
                 T_prev,
                 T_goal,
-                _slerp(T_prev, T_goal),
                 make_profile(self.profile_kind, [lin, ang], [v_lin, v_ang], [a_lin, a_ang]),
                 t,
             )
@@ -308,7 +335,7 @@ class PoseSequenceMove(_Move):
             raise ValueError("pose times must increase strictly")
         self.poses = [_as_pose(T, f"pose {i + 1}") for i, T in enumerate(P)]
         self.joint_path: list[np.ndarray] = []
-        self._slerps = [_slerp(a, b) for a, b in zip(self.poses[:-1], self.poses[1:], strict=True)]
+        self._quats = [_quat(T[:3, :3]) for T in self.poses]
         self._q_prev: np.ndarray | None = None
 
     def start(self, q_start=None) -> MoveStatus:
@@ -336,10 +363,8 @@ class PoseSequenceMove(_Move):
         tt = self.times[0] + min(max(t, 0.0), self.duration)
         i = int(np.clip(np.searchsorted(self.times, tt, side="right") - 1, 0, len(self.poses) - 2))
         s = (tt - self.times[i]) / (self.times[i + 1] - self.times[i])
-        T = np.eye(4)
-        T[:3, :3] = self._slerps[i]([s]).as_matrix()[0]
-        T[:3, 3] = (1 - s) * self.poses[i][:3, 3] + s * self.poses[i + 1][:3, 3]
-        return T
+        a, b = self.poses[i], self.poses[i + 1]
+        return _interpolate(a, b, self._quats[i], self._quats[i + 1], s)
 
     def _setpoint_at(self, t: float) -> np.ndarray:
         q = inverse_kinematics(self.pose_at(t), self._q_prev)
