@@ -194,6 +194,14 @@ class World:
         self.needle = NeedleBody(self.client, self.task.needle, T_needle, tissue_ids)
         for arm in self.arms.values():
             self.needle.ignore_collisions_with(arm.body.body)
+        # A needle at rest on the tissue may sleep (Bullet deactivation): contacts of a resting
+        # needle otherwise dominate the physics cost. Grasp and release wake it.
+        pb.changeDynamics(
+            self.needle.id,
+            -1,
+            activationState=pb.ACTIVATION_STATE_ENABLE_SLEEPING,
+            physicsClientId=self.client,
+        )
         if self.scene.needle.start == "in_psm2_jaw":
             self.psm2.jaw.servo_jp(0.0)
             self._attach("psm2", self.in_jaw_grasp_pose())
@@ -245,6 +253,7 @@ class World:
         During a handover both jaws hold the needle; it is attached to the latest grasp and
         passes back to the other arm, where it is, when the latest one opens.
         """
+        self._wake_needle()
         self.needle.attach(self.arms[arm].body.body, LINK_TIP, T_tip_needle)
         if arm in self.needle_holders:
             self.needle_holders.remove(arm)
@@ -252,6 +261,14 @@ class World:
         jaw = self.arms[arm].jaw
         jaw.min_angle = JAW_ON_NEEDLE
         jaw._angle = max(jaw._angle, JAW_ON_NEEDLE)  # the blades rest on the wire
+
+    def _wake_needle(self) -> None:
+        pb.changeDynamics(
+            self.needle.id,
+            -1,
+            activationState=pb.ACTIVATION_STATE_WAKE_UP,
+            physicsClientId=self.client,
+        )
 
     def _release(self, arm: str) -> None:
         """``arm`` opens its jaw on the needle."""
@@ -266,6 +283,7 @@ class World:
             self._attach(other, invert(self.true_tip_pose(other)) @ self.needle.pose())
         else:
             self.needle.detach()
+            self._wake_needle()
             T = self.needle.pose()
             if self.phantom.inserted(T):
                 self.needle.freeze(T)  # the tissue holds an inserted needle that is released

@@ -253,3 +253,35 @@ def test_explicit_needle_pose_and_random_offsets_from_the_scene():
         assert not np.array_equal(gt.joint_offset("psm1"), gt.joint_offset("psm2"))
         # The arms start where the scene says, as far as their encoders can tell.
         assert np.allclose(w.psm2.measured_jp(), scene.arms["psm2"].initial_jp)
+
+
+def test_pick_up_a_resting_needle_lift_and_drop_it():
+    with World.from_scene(scene_from_dict({"servo": {"error_model": False}})) as w:
+        gt = GroundTruth(w)
+        w.step(2.5)  # the needle comes to rest (and may fall asleep)
+        T_rest = gt.needle_pose()
+        goal = np.eye(4)
+        a = np.deg2rad(150.0)
+        goal[:3, 0] = -(T_rest[:3, :3] @ w.task.needle.tangent_at(a))
+        goal[:3, 2] = -T_rest[:3, 2]  # jaws point down into the tissue
+        goal[:3, 1] = np.cross(goal[:3, 2], goal[:3, 0])
+        goal[:3, 3] = T_rest[:3, :3] @ w.task.needle.point_at(a) + T_rest[:3, 3]
+        above = goal.copy()
+        above[2, 3] += 0.01
+        base = invert(w.psm2.base_frame())
+        w.psm2.jaw.open()
+        for g in (above, goal):
+            w.psm2.move_cp(base @ g)
+            while w.psm2.is_busy():
+                w.step(0.1)
+        w.psm2.jaw.close()
+        w.step(0.8)
+        assert gt.needle_holder() == "psm2", w.last_grasp["psm2"].reason
+        w.psm2.move_cp(base @ above)
+        while w.psm2.is_busy():
+            w.step(0.1)
+        assert gt.needle_pose()[2, 3] > T_rest[2, 3] + 0.008  # lifted with the jaw
+        w.psm2.jaw.open()
+        w.step(1.5)
+        assert gt.needle_holder() is None
+        assert gt.needle_pose()[2, 3] == pytest.approx(T_rest[2, 3], abs=1e-3)  # back down
