@@ -54,7 +54,7 @@ MARK_RGBA = (0.12, 0.09, 0.09, 1.0)
 CAPTURE_RADIUS = 0.010
 #: A port is engaged while the needle centre-line pierces its plane within this distance.
 ENGAGE_RADIUS = 0.005
-_N_CENTERLINE = 241
+_N_CENTERLINE = 121
 
 
 @dataclass
@@ -140,6 +140,14 @@ def _peak_x(entry: Port, exit_: Port) -> float:
     return float(np.linalg.solve(A, b)[0])
 
 
+def _check_pose(T) -> np.ndarray:
+    """A 4×4 finite pose as float array, else a ValueError with the reason."""
+    T = np.asarray(T, dtype=float)
+    if T.shape != (4, 4) or not np.all(np.isfinite(T)):
+        raise ValueError(f"needle pose must be a finite 4×4 transform, got shape {T.shape}")
+    return T
+
+
 class PhantomBody:
     """The phantom in one pybullet client; records the needle's port crossings and strain."""
 
@@ -156,9 +164,15 @@ class PhantomBody:
         self.crossings: list[Crossing] = []
         self.strain: dict[str, Strain] = {}
         self.max_strain: dict[str, Strain] = {}
-        self._last_tip: dict[str, np.ndarray] = {}
+        self._ports = self.phantom.ports()  # world frames, fixed for this body
+        self._R_port_world = np.stack([q.T[:3, :3].T for q in self._ports])  # P×3×3
+        self._port_pos = np.stack([q.position for q in self._ports])  # P×3
+        self._M_ports = self._R_port_world.reshape(-1, 3)  # 3P×3: world → port rotations
+        self._m_ports = np.einsum("pij,pj->pi", self._R_port_world, self._port_pos).ravel()
+        self._centerline = self.needle_model.centerline(_N_CENTERLINE)
+        self._last_tip: np.ndarray | None = None  # tip in every port frame, P×3
         self._last_t: float | None = None
-        self._open_exit: dict[str, Crossing] = {}
+        self._open_exit: dict[int, Crossing] = {}
 
     # --- geometry ---------------------------------------------------------------------------
     def _build_segments(self) -> list[_Segment]:
@@ -311,28 +325,32 @@ class PhantomBody:
 
     # --- needle bookkeeping -----------------------------------------------------------------
     def _centerline_world(self, T_world_needle: np.ndarray) -> np.ndarray:
-        pts = self.needle_model.centerline(_N_CENTERLINE)
-        return pts @ T_world_needle[:3, :3].T + T_world_needle[:3, 3]
+        return self._centerline @ T_world_needle[:3, :3].T + T_world_needle[:3, 3]
+
+    def _in_port_frames(self, points_world: np.ndarray) -> np.ndarray:
+        """World points (N×3) in every port frame: P×N×3 (one matrix product for speed)."""
+        P = len(self._ports)
+        flat = points_world @ self._M_ports.T - self._m_ports  # N×3P
+        return flat.reshape(len(points_world), P, 3).transpose(1, 0, 2)
 
     def inserted(self, T_world_needle: np.ndarray) -> bool:
         """True when the needle is stuck in the tissue (its centre-line passes into it)."""
+        T_world_needle = _check_pose(T_world_needle)
         return bool(self.inside_tissue(self._centerline_world(T_world_needle)).any())
 
     def engaged_ports(self, T_world_needle: np.ndarray) -> list[str]:
         """Ports whose plane the centre-line pierces within ``ENGAGE_RADIUS`` of the port."""
-        pts = self._centerline_world(T_world_needle)
-        out = []
-        for port in self.phantom.ports():
-            local = (pts - port.T[:3, 3]) @ port.T[:3, :3]
-            z = local[:, 2]
-            idx = np.nonzero(np.sign(z[:-1]) * np.sign(z[1:]) < 0)[0]
-            for i in idx:
-                s = z[i] / (z[i] - z[i + 1])
-                c = local[i] + s * (local[i + 1] - local[i])
-                if np.hypot(c[0], c[1]) <= ENGAGE_RADIUS:
-                    out.append(port.name)
-                    break
-        return out
+        T_world_needle = _check_pose(T_world_needle)
+        local = self._in_port_frames(self._centerline_world(T_world_needle))  # P×N×3
+        z = local[:, :, 2]
+        pi, ni = np.nonzero(z[:, :-1] * z[:, 1:] < 0)
+        if len(pi) == 0:
+            return []
+        a, b = local[pi, ni], local[pi, ni + 1]
+        s = (a[:, 2] / (a[:, 2] - b[:, 2]))[:, None]
+        c = a + s * (b - a)
+        hit = np.unique(pi[np.hypot(c[:, 0], c[:, 1]) <= ENGAGE_RADIUS])
+        return [self._ports[i].name for i in hit]
 
     def port_strain(self, T_world_needle: np.ndarray, port: Port) -> Strain:
         """Distance from a port to the needle's circle (3-D) and to its plane."""
@@ -344,54 +362,52 @@ class PhantomBody:
 
     def update(self, T_world_needle: np.ndarray, t: float) -> list[Crossing]:
         """Record tip crossings since the last call and the current strain; returns new ones."""
-        T_world_needle = np.asarray(T_world_needle, dtype=float)
+        T_world_needle = _check_pose(T_world_needle)
         tip = T_world_needle[:3, :3] @ self.needle_model.tip + T_world_needle[:3, 3]
+        local = self._in_port_frames(tip[None])[:, 0, :]  # P×3
+        prev, self._last_tip = self._last_tip, local
         new = []
-        for port in self.phantom.ports():
-            local = invert(port.T) @ np.r_[tip, 1.0]
-            local = local[:3]
-            prev = self._last_tip.get(port.name)
-            self._last_tip[port.name] = local
-            if prev is not None and self._last_t is not None:
-                inward = prev[2] > 0.0 >= local[2]
-                outward = prev[2] <= 0.0 < local[2]
-                if inward or outward:
-                    s = prev[2] / (prev[2] - local[2])
-                    c = prev + s * (local - prev)
-                    lateral = float(np.hypot(c[0], c[1]))
-                    if lateral <= CAPTURE_RADIUS:
-                        rec = Crossing(
-                            port.name,
-                            port.pair,
-                            port.kind,
-                            float(self._last_t + s * (t - self._last_t)),
-                            bool(inward),
-                            lateral,
-                            c,
-                        )
-                        self.crossings.append(rec)
-                        new.append(rec)
-                        self._open_exit.pop(port.name, None)
-                        if port.kind == "exit" and outward:
-                            self._open_exit[port.name] = rec
-            rec = self._open_exit.get(port.name)
-            if rec is not None:
-                if local[2] > 0.0:
-                    rec.tip_out = max(rec.tip_out, float(np.linalg.norm(local - rec.point)))
-                else:
-                    self._open_exit.pop(port.name)
+        if prev is not None and self._last_t is not None:
+            inward = (prev[:, 2] > 0.0) & (local[:, 2] <= 0.0)
+            outward = (prev[:, 2] <= 0.0) & (local[:, 2] > 0.0)
+            for i in np.nonzero(inward | outward)[0]:
+                s = prev[i, 2] / (prev[i, 2] - local[i, 2])
+                c = prev[i] + s * (local[i] - prev[i])
+                lateral = float(np.hypot(c[0], c[1]))
+                if lateral > CAPTURE_RADIUS:
+                    continue
+                port = self._ports[i]
+                rec = Crossing(
+                    port.name,
+                    port.pair,
+                    port.kind,
+                    float(self._last_t + s * (t - self._last_t)),
+                    bool(inward[i]),
+                    lateral,
+                    c,
+                )
+                self.crossings.append(rec)
+                new.append(rec)
+                self._open_exit.pop(int(i), None)
+                if port.kind == "exit" and outward[i]:
+                    self._open_exit[int(i)] = rec
+        for i, rec in list(self._open_exit.items()):
+            if local[i, 2] > 0.0:
+                rec.tip_out = max(rec.tip_out, float(np.linalg.norm(local[i] - rec.point)))
+            else:
+                del self._open_exit[i]
         self._last_t = float(t)
         self.strain = {}
         for name in self.engaged_ports(T_world_needle):
-            s = self.port_strain(T_world_needle, self.phantom.port(name))
-            self.strain[name] = s
+            st = self.port_strain(T_world_needle, self.phantom.port(name))
+            self.strain[name] = st
             m = self.max_strain.get(name)
-            if m is None or s.circle > m.circle:
-                self.max_strain[name] = s
+            if m is None or st.circle > m.circle:
+                self.max_strain[name] = st
         return new
 
     def reset_tracking(self) -> None:
         """Forget the last tip position (call after teleporting the needle)."""
-        self._last_tip.clear()
+        self._last_tip = None
         self._last_t = None
         self._open_exit.clear()
