@@ -28,6 +28,14 @@ NEEDLE_SPECULAR = (0.9, 0.9, 0.9)
 HOLD_FORCE = 50.0
 
 
+def _check_pose(T, what: str = "needle pose") -> np.ndarray:
+    """A finite 4×4 transform as a float array, else a ValueError naming it."""
+    T = np.asarray(T, dtype=float)
+    if T.shape != (4, 4) or not np.all(np.isfinite(T)):
+        raise ValueError(f"{what} must be a finite 4×4 transform, got shape {T.shape}")
+    return T
+
+
 def _pose(position, quat) -> np.ndarray:
     return make_transform(matrix_from_quat_xyzw(quat), position)
 
@@ -63,6 +71,9 @@ class NeedleBody:
         tissue_ids: tuple[int, ...] = (),
         mass: float = NEEDLE_MASS,
     ) -> None:
+        T_world_needle = _check_pose(T_world_needle)
+        if not mass > 0:
+            raise ValueError(f"needle mass must be positive, got {mass!r}")
         self.client = client
         self.model = model
         load_renderer(client)  # bodies created before the EGL plugin loads are never drawn
@@ -136,7 +147,8 @@ class NeedleBody:
 
     def set_pose(self, T_world_needle: np.ndarray) -> None:
         """Teleport the needle (velocity zeroed); a held or frozen needle keeps its constraint."""
-        T = np.asarray(T_world_needle) @ self._T_needle_com
+        T_world_needle = _check_pose(T_world_needle)
+        T = T_world_needle @ self._T_needle_com
         p.resetBasePositionAndOrientation(
             self.id, list(T[:3, 3]), list(quat_xyzw(T[:3, :3])), physicsClientId=self.client
         )
@@ -243,9 +255,7 @@ class NeedleBody:
 
     def attach(self, parent_body: int, parent_link: int, T_link_needle: np.ndarray) -> None:
         """Hold the needle rigidly at ``T_link_needle`` in the parent link's frame."""
-        T_link_needle = np.asarray(T_link_needle, dtype=float)
-        if T_link_needle.shape != (4, 4):
-            raise ValueError(f"T_link_needle must be 4×4, got shape {T_link_needle.shape}")
+        T_link_needle = _check_pose(T_link_needle, "T_link_needle")
         self._remove_constraint()
         self._frozen = False
         self._set_tissue_collision(False)
@@ -313,7 +323,7 @@ class NeedleBody:
 
     def freeze(self, T_world_needle: np.ndarray | None = None) -> None:
         """The tissue holds the needle where it is (or at ``T_world_needle``); drops any holder."""
-        T = self.pose() if T_world_needle is None else np.asarray(T_world_needle, dtype=float)
+        T = self.pose() if T_world_needle is None else _check_pose(T_world_needle)
         self._remove_constraint()
         self._held_by = None
         self._T_link_needle = None

@@ -95,8 +95,12 @@ def test_attached_needle_follows_parent_and_falls_when_released(client):
     T = needle.pose()
     assert np.linalg.norm(T[:3, 3] - expected[:3, 3]) < 1e-9
     assert rotation_angle(T[:3, :3], expected[:3, :3]) < 1e-8
+    with pytest.raises(ValueError, match="T_link_needle"):
+        needle.attach(arm, 0, np.eye(3))
     needle.detach()
     assert needle.held_by is None and needle.state == "free"
+    with pytest.raises(ValueError, match="needle pose"):
+        needle.set_pose(np.full((4, 4), np.nan))
     step(client, 200)
     assert needle.pose()[2, 3] < T[2, 3] - 0.1  # free fall for 0.2 s (no tissue here)
 
