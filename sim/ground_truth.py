@@ -25,11 +25,11 @@ class GroundTruth:
     # ---------------------------------------------------------------- arms
     def joint_positions(self, arm: str) -> np.ndarray:
         """True joint positions q_actual (what the encoders would read without the bias)."""
-        return self._world.arms[arm].true_jp
+        return self._world.arms[arm]._true_jp()
 
     def joint_offset(self, arm: str) -> np.ndarray:
         """The hidden offset Δq (6 values; joints 1-3 non-zero)."""
-        return self._world.arms[arm].true_offset
+        return self._world.arms[arm]._true_offset()
 
     def tip_pose_base(self, arm: str) -> np.ndarray:
         """True tool-tip pose in the arm's base (RCM) frame."""

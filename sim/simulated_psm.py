@@ -232,14 +232,12 @@ class SimulatedPSM:
         """Reset the pybullet links to the true joint state (kinematic arm)."""
         self.body.set_joints(self._servo.q, self.jaw._angle)
 
-    @property
-    def true_jp(self) -> np.ndarray:
-        """True joint positions (ground truth; hand out only via ``ground_truth``)."""
+    def _true_jp(self) -> np.ndarray:
+        """True joint positions: private, read only by ``ground_truth`` and the world."""
         return self._servo.q.copy()
 
-    @property
-    def true_offset(self) -> np.ndarray:
-        """True Δq (ground truth; hand out only via ``ground_truth``)."""
+    def _true_offset(self) -> np.ndarray:
+        """True Δq: private, read only by ``ground_truth``."""
         return self._offset.delta_q
 
 

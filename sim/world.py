@@ -280,7 +280,7 @@ class World:
             return
         if self.needle_holders:
             other = self.needle_holders.pop()
-            self._attach(other, invert(self.true_tip_pose(other)) @ self.needle.pose())
+            self._attach(other, invert(self._true_tip_pose(other)) @ self.needle.pose())
         else:
             self.needle.detach()
             self._wake_needle()
@@ -362,7 +362,7 @@ class World:
         """
         self.needle.update()  # exact needle pose first
         result = check_grasp(
-            self.true_tip_pose(arm),
+            self._true_tip_pose(arm),
             float(self.arms[arm].jaw.measured_jp()[0]),
             self.needle.pose(),
             self.task.needle,
@@ -423,10 +423,10 @@ class World:
             masks["phantom"] = view.mask(self.phantom.id)
         return masks
 
-    def true_tip_pose(self, arm: str) -> np.ndarray:
-        """World pose of an arm's true tip (ground truth; use ``ground_truth``)."""
+    def _true_tip_pose(self, arm: str) -> np.ndarray:
+        """World pose of an arm's true tip (private: ``ground_truth`` hands it out)."""
         a = self.arms[arm]
-        return a.base_frame() @ forward_kinematics(a.true_jp)
+        return a.base_frame() @ forward_kinematics(a._true_jp())
 
     def close(self) -> None:
         """Disconnect the pybullet client (idempotent)."""
