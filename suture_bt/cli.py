@@ -29,13 +29,17 @@ def _import_pybullet_quietly() -> None:
 
 _import_pybullet_quietly()
 
+from suture_bt.commands import data as data_command  # noqa: E402
 from suture_bt.commands import run as run_command  # noqa: E402
 from suture_bt.commands import scene as scene_command  # noqa: E402
+from suture_bt.commands import train as train_command  # noqa: E402
 
 #: Subcommand modules; each has ``register(subparsers)`` that sets ``func`` on its parser.
 COMMANDS = [
     scene_command,
     run_command,
+    data_command,
+    train_command,
 ]
 
 PROG = "suture-bt"

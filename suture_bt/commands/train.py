@@ -1,0 +1,48 @@
+"""``suture-bt train TARGET [--data DIR] [--out PATH]``: train a network from a dataset folder.
+
+Targets live in :data:`TARGETS` (name → ``fn(args) -> result dict``); adding one is a
+one-line edit.
+"""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+DEFAULT_DATA = {"needle": "data/needle"}
+
+
+def _needle(args) -> dict:
+    from suture_bt.perception.network import DEFAULT_WEIGHTS
+    from suture_bt.perception.training import TrainConfig, train
+
+    cfg = TrainConfig(seed=args.seed)
+    if args.steps is not None:
+        cfg.steps = args.steps
+    if args.minutes is not None:
+        cfg.minutes = args.minutes
+    out = Path(args.out) if args.out else DEFAULT_WEIGHTS
+    return train(Path(args.data or DEFAULT_DATA["needle"]), out, cfg) | {"weights": str(out)}
+
+
+#: Trainers by target name.
+TARGETS = {
+    "needle": _needle,
+}
+
+
+def register(subparsers) -> None:
+    p = subparsers.add_parser("train", help="train a network on a simulated dataset")
+    p.add_argument("target", choices=sorted(TARGETS), help="which network")
+    p.add_argument("--data", metavar="DIR", help="dataset folder (default: data/<target>)")
+    p.add_argument("--out", metavar="PATH", help="weights file (default: the packaged weights)")
+    p.add_argument("--seed", type=int, default=0, help="random seed (default 0)")
+    p.add_argument("--steps", type=int, help="maximum number of updates")
+    p.add_argument("--minutes", type=float, help="wall-time cap in minutes")
+    p.set_defaults(func=run)
+
+
+def run(args) -> int:
+    result = TARGETS[args.target](args)
+    print(json.dumps(result))
+    return 0

@@ -1,0 +1,100 @@
+"""Coarse-to-fine needle mask: the coarse CNN mask gates a full-resolution colour test.
+
+The needle is grey metal (blue ≥ red, also when saturated white at 2× brightness); the tissue
+is pink (red well above blue) and the empty cavity is dark red. Inside a band around the
+upsampled coarse mask, a pixel is needle when blue − red ≥ ``min_blue_minus_red`` and its
+mean level ≥ ``min_level``. The renderer does not anti-alias, so a per-pixel decision keeps
+the wire's edges where they are (no blur, no bias).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import cv2
+import numpy as np
+
+from suture_bt.perception.pose_fit import MaskView
+
+
+@dataclass(frozen=True)
+class ColourRule:
+    """Thresholds of the needle colour test (8-bit levels)."""
+
+    min_blue_minus_red: float = -12.0
+    min_level: float = 32.0
+    band_px: int = 9
+    min_component_px: int = 4
+
+
+def coarse_components(prob: np.ndarray, threshold: float = 0.5, keep_ratio: float = 0.15):
+    """Binary coarse mask keeping the largest blob and blobs ≥ keep_ratio of it (occlusion
+    splits a needle into pieces); empty when nothing passes the threshold."""
+    m = (prob > threshold).astype(np.uint8)
+    n, lab, stats, _ = cv2.connectedComponentsWithStats(m, connectivity=8)
+    if n <= 1:
+        return np.zeros_like(m, bool)
+    areas = stats[1:, cv2.CC_STAT_AREA]
+    keep = 1 + np.nonzero(areas >= keep_ratio * areas.max())[0]
+    return np.isin(lab, keep)
+
+
+def remove_thick(mask: np.ndarray, max_half_width_px: float) -> np.ndarray:
+    """Drop blobs thicker than the wire (grey jaws, shaft) that touch the needle's mask.
+
+    Pixels deeper than ``max_half_width_px`` inside the mask seed the thick parts, which are
+    grown back by that depth (plus one pixel) and removed; the wire's pixels next to a jaw go
+    with them, which the one-sided fit tolerates like any occlusion.
+    """
+    m = mask.astype(np.uint8)
+    if not m.any():
+        return mask
+    dt = cv2.distanceTransform(np.pad(m, 1), cv2.DIST_L2, 5)[1:-1, 1:-1]
+    core = (dt > max_half_width_px).astype(np.uint8)
+    if not core.any():
+        return mask
+    r = int(np.ceil(max_half_width_px)) + 2
+    grown = cv2.dilate(core, cv2.getStructuringElement(cv2.MORPH_ELLIPSE, (2 * r + 1, 2 * r + 1)))
+    return mask & (grown == 0)
+
+
+def refine_mask(
+    rgb: np.ndarray,
+    coarse: np.ndarray,
+    scale: float,
+    rule: ColourRule = ColourRule(),
+    max_half_width_px: float | None = None,
+) -> MaskView:
+    """Full-resolution needle mask (a crop) from an RGB image and a coarse mask.
+
+    ``coarse`` pixel (i, j) covers full-resolution pixels around ((j + 0.5)·scale − 0.5, …):
+    ``scale`` is full-resolution pixels per coarse pixel. ``max_half_width_px`` (the wire's
+    largest plausible half width in pixels) enables :func:`remove_thick`.
+    """
+    H, W = rgb.shape[:2]
+    ys, xs = np.nonzero(coarse)
+    if len(xs) == 0:
+        return MaskView(np.zeros((0, 0), bool), (0, 0))
+    pad = rule.band_px + scale
+    x0 = int(max(np.floor(xs.min() * scale - pad), 0))
+    x1 = int(min(np.ceil((xs.max() + 1) * scale + pad), W))
+    y0 = int(max(np.floor(ys.min() * scale - pad), 0))
+    y1 = int(min(np.ceil((ys.max() + 1) * scale + pad), H))
+    crop = rgb[y0:y1, x0:x1].astype(np.int16)
+    # Coarse mask resampled onto the crop's pixel grid, then dilated by the band.
+    gx = ((np.arange(x0, x1) + 0.5) / scale - 0.5).round().astype(int).clip(0, coarse.shape[1] - 1)
+    gy = ((np.arange(y0, y1) + 0.5) / scale - 0.5).round().astype(int).clip(0, coarse.shape[0] - 1)
+    gate = coarse[np.ix_(gy, gx)].astype(np.uint8)
+    k = 2 * rule.band_px + 1
+    gate = cv2.dilate(gate, cv2.getStructuringElement(cv2.MORPH_ELLIPSE, (k, k))) > 0
+    level = crop.sum(-1) / 3.0
+    needle = (crop[..., 2] - crop[..., 0] >= rule.min_blue_minus_red) & (level >= rule.min_level)
+    m = needle & gate
+    if max_half_width_px is not None:
+        m = remove_thick(m, max_half_width_px)
+    m = m.astype(np.uint8)
+    n, lab, stats, _ = cv2.connectedComponentsWithStats(m, connectivity=8)
+    small = 1 + np.nonzero(stats[1:, cv2.CC_STAT_AREA] < rule.min_component_px)[0]
+    if len(small):
+        m[np.isin(lab, small)] = 0
+    return MaskView(m.astype(bool), (x0, y0))

@@ -1,0 +1,161 @@
+"""Needle localisation pipeline: stereo images → needle pose with evidence, or NeedleNotFound.
+
+1. Both images, area-downsampled to the network width, go through the CNN in one batch:
+   coarse needle mask + base/tip heatmaps (sub-pixel keypoints).
+2. Each eye's coarse mask gates a full-resolution colour test (:mod:`colour_refine`).
+3. The stereo pose fit (:mod:`pose_fit`) starts from the left keypoints, with a depth hint
+   from their stereo disparity, and optionally a warm start from the previous estimate.
+Only images and the calibrated camera model are used (no ground truth).
+"""
+
+from __future__ import annotations
+
+import os
+import time
+from dataclasses import dataclass, field
+
+import cv2
+import numpy as np
+import torch
+
+from suture_bt.geometry import NeedleModel
+from suture_bt.interfaces import StereoCameraModel
+from suture_bt.perception.colour_refine import ColourRule, coarse_components, refine_mask
+from suture_bt.perception.network import (
+    INPUT_SIZE,
+    OUTPUT_STRIDE,
+    NeedleNet,
+    decode_keypoints,
+    load_network,
+)
+from suture_bt.perception.pose_fit import MaskView, NeedleNotFound, PoseFitResult, PoseFitter
+
+#: A keypoint heatmap peak below this probability is not trusted (the mask's ends are used).
+MIN_KEYPOINT_SCORE = 0.15
+#: Fewest full-resolution needle pixels per eye to attempt a fit.
+MIN_NEEDLE_PIXELS = 15
+
+
+@dataclass(frozen=True)
+class NeedleEstimate:
+    """The localiser's answer: pose (left camera and world), fit evidence and timings (ms)."""
+
+    T_cam_needle: np.ndarray
+    T_world_needle: np.ndarray
+    rms_px: float
+    inlier_fraction: float
+    ambiguity: float
+    keypoints_left: np.ndarray
+    keypoint_scores: np.ndarray
+    timings_ms: dict
+    fit: PoseFitResult = field(repr=False)
+    masks: tuple[MaskView, MaskView] = field(repr=False)
+
+    @property
+    def confidence(self) -> float:
+        """0..1: share of edge points explained, discounted for large residuals."""
+        return float(self.inlier_fraction / (1.0 + max(self.rms_px - 0.5, 0.0)))
+
+
+def _net_input(rgb: np.ndarray, width: int) -> tuple[np.ndarray, float]:
+    """Area-downsample to ``width`` (aspect kept), pad rows to a multiple of 16; scale."""
+    H, W = rgb.shape[:2]
+    s = width / W
+    h = int(round(H * s))
+    small = cv2.resize(rgb, (width, h), interpolation=cv2.INTER_AREA)
+    hp = int(np.ceil(h / 16) * 16)
+    if hp != h:
+        small = np.concatenate([small, np.zeros((hp - h, width, 3), small.dtype)], 0)
+    return small, s
+
+
+class NeedleLocalizer:
+    """Stateless per call except for the optional warm start (``previous``)."""
+
+    def __init__(
+        self,
+        stereo: StereoCameraModel,
+        model: NeedleModel | None = None,
+        net: NeedleNet | None = None,
+        weights: str | os.PathLike | None = None,
+        threads: int | None = None,
+        rule: ColourRule | None = None,
+    ) -> None:
+        self.stereo = stereo
+        self.model = model or NeedleModel()
+        self.net = net if net is not None else load_network(weights)
+        self.net.eval()
+        if threads is not None:
+            torch.set_num_threads(threads)
+        self.rule = rule or ColourRule()
+        self.fitter = PoseFitter(stereo, self.model)
+        self.input_width = INPUT_SIZE[0]
+
+    def network(self, left: np.ndarray, right: np.ndarray):
+        """Coarse mask probabilities (2, h, w), keypoints (2, 2, 2) in full-res px, scores."""
+        for name, img in (("left", left), ("right", right)):
+            if img is None or img.ndim != 3 or img.shape[2] != 3 or img.size == 0:
+                shape = None if img is None else img.shape
+                raise ValueError(f"{name} image must be H×W×3 RGB, got {shape}")
+        a, s = _net_input(left, self.input_width)
+        b, _ = _net_input(right, self.input_width)
+        x = torch.from_numpy(np.stack([a, b])).permute(0, 3, 1, 2).float().div_(255.0)
+        with torch.inference_mode():
+            out = self.net(x)
+        prob = torch.sigmoid(out[:, 0]).numpy()
+        kp, score = decode_keypoints(out[:, 1:])
+        kp_full = ((kp + 0.5) * OUTPUT_STRIDE) / s - 0.5
+        return prob, kp_full, score, OUTPUT_STRIDE / s
+
+    def localize(
+        self, left: np.ndarray, right: np.ndarray, previous: np.ndarray | None = None
+    ) -> NeedleEstimate:
+        """Estimate the needle pose; ``previous`` (T_cam_needle) warm-starts the fit.
+
+        Raises :class:`NeedleNotFound` (with a reason) when the needle is not visible enough.
+        """
+        t0 = time.perf_counter()
+        prob, kp, score, scale = self.network(left, right)
+        t1 = time.perf_counter()
+        views = []
+        for eye, img in enumerate((left, right)):
+            name = ("left", "right")[eye]
+            h = int(round(img.shape[0] / scale))
+            coarse = coarse_components(prob[eye][:h])
+            if coarse.sum() == 0:
+                raise NeedleNotFound(f"the network sees no needle in the {name} image")
+            view = refine_mask(img, coarse, scale, self.rule)
+            if int(view.mask.sum()) < MIN_NEEDLE_PIXELS:
+                raise NeedleNotFound(
+                    f"too few needle-coloured pixels in the {name} image "
+                    f"({int(view.mask.sum())} < {MIN_NEEDLE_PIXELS})"
+                )
+            views.append(view)
+        t2 = time.perf_counter()
+        ends = None
+        depth = None
+        if score[0].min() >= MIN_KEYPOINT_SCORE:
+            ends = (kp[0, 0], kp[0, 1])
+            if score[1].min() >= MIN_KEYPOINT_SCORE:
+                disp = kp[0, :, 0] - kp[1, :, 0]
+                if np.all(disp > 1.0):
+                    depth = float(np.mean(self.stereo.left.fx * self.stereo.baseline / disp))
+        fit = self.fitter.fit(views[0], views[1], ends, depth_hint=depth, warm_start=previous)
+        t3 = time.perf_counter()
+        return NeedleEstimate(
+            T_cam_needle=fit.T_cam_needle,
+            T_world_needle=fit.T_world_needle,
+            rms_px=fit.rms_px,
+            inlier_fraction=fit.inlier_fraction,
+            ambiguity=fit.ambiguity,
+            keypoints_left=kp[0],
+            keypoint_scores=score,
+            timings_ms={
+                "network": 1e3 * (t1 - t0),
+                "refine": 1e3 * (t2 - t1),
+                "fit": 1e3 * (t3 - t2),
+                "total": 1e3 * (t3 - t0),
+            },
+            fit=fit,
+            masks=(views[0], views[1]),
+        )

@@ -1,0 +1,155 @@
+"""Multi-task needle CNN: shared encoder, needle-mask head, base/tip keypoint heatmap heads.
+
+A small U-Net (about 0.2 M parameters) that runs on a downsampled image (default 480×272).
+Outputs at half the input resolution: channel 0 the needle-mask logit, channels 1-2 the base
+and tip heatmap logits. Keypoints are decoded with a sub-pixel soft-argmax around the peak.
+Weights load with ``torch.load(weights_only=True)``; a missing or mismatched file raises
+:class:`WeightsError` naming the file.
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+import torch
+from torch import nn
+from torch.nn import functional as F
+
+#: Network input size (width, height) used for training and inference.
+INPUT_SIZE = (480, 272)
+#: Output stride relative to the network input.
+OUTPUT_STRIDE = 2
+DEFAULT_WEIGHTS = Path(__file__).with_name("weights") / "needle_net.pt"
+WEIGHTS_FORMAT = "suture_bt.needle_net.v1"
+
+
+class WeightsError(RuntimeError):
+    """The needle network's weights file is missing or does not match the architecture."""
+
+
+def _block(cin: int, cout: int, stride: int = 1) -> nn.Sequential:
+    return nn.Sequential(
+        nn.Conv2d(cin, cout, 3, stride, 1, bias=False),
+        nn.BatchNorm2d(cout),
+        nn.ReLU(inplace=True),
+    )
+
+
+def _sep(cin: int, cout: int) -> nn.Sequential:
+    """Depthwise-separable 3×3 conv block (cheap on a CPU)."""
+    return nn.Sequential(
+        nn.Conv2d(cin, cin, 3, 1, 1, groups=cin, bias=False),
+        nn.Conv2d(cin, cout, 1, bias=False),
+        nn.BatchNorm2d(cout),
+        nn.ReLU(inplace=True),
+    )
+
+
+class NeedleNet(nn.Module):
+    """Encoder (strides 2-16) and a light decoder back to stride 2; 3 output channels."""
+
+    def __init__(self, width: int = 16) -> None:
+        super().__init__()
+        c1, c2, c3, c4 = width, 2 * width, 4 * width, 6 * width
+        self.width = width
+        self.enc1 = nn.Sequential(_block(3, c1, 2), _sep(c1, c1))
+        self.enc2 = nn.Sequential(_block(c1, c2, 2), _sep(c2, c2))
+        self.enc3 = nn.Sequential(_block(c2, c3, 2), _sep(c3, c3))
+        self.enc4 = nn.Sequential(_block(c3, c4, 2), _sep(c4, c4), _sep(c4, c4))
+        self.lat3 = nn.Conv2d(c3, c4, 1)
+        self.dec3 = _sep(c4, c3)
+        self.lat2 = nn.Conv2d(c2, c3, 1)
+        self.dec2 = _sep(c3, c2)
+        self.lat1 = nn.Conv2d(c1, c2, 1)
+        self.dec1 = nn.Sequential(_sep(c2, c1), nn.Conv2d(c1, c1, 3, 1, 1), nn.ReLU(inplace=True))
+        self.head = nn.Conv2d(c1, 3, 1)
+
+    def forward(self, x: torch.Tensor) -> torch.Tensor:
+        """(B, 3, H, W) float in [0, 1] → (B, 3, H/2, W/2) logits (mask, base, tip)."""
+        e1 = self.enc1(x)
+        e2 = self.enc2(e1)
+        e3 = self.enc3(e2)
+        e4 = self.enc4(e3)
+        d3 = self.dec3(self.lat3(e3) + F.interpolate(e4, size=e3.shape[-2:], mode="nearest"))
+        d2 = self.dec2(self.lat2(e2) + F.interpolate(d3, size=e2.shape[-2:], mode="nearest"))
+        d1 = self.dec1(self.lat1(e1) + F.interpolate(d2, size=e1.shape[-2:], mode="nearest"))
+        return self.head(d1)
+
+
+def count_parameters(net: nn.Module) -> int:
+    return sum(p.numel() for p in net.parameters())
+
+
+def to_input(rgb: np.ndarray) -> torch.Tensor:
+    """An RGB uint8 image (H, W, 3) at the network input size → (1, 3, H, W) float tensor."""
+    if rgb.ndim != 3 or rgb.shape[2] != 3:
+        raise ValueError(f"expected an H×W×3 RGB image, got shape {rgb.shape}")
+    t = torch.from_numpy(np.ascontiguousarray(rgb)).permute(2, 0, 1).float().div_(255.0)
+    return t[None]
+
+
+def decode_keypoints(heat: torch.Tensor) -> tuple[np.ndarray, np.ndarray]:
+    """Sub-pixel peaks of heatmap logits (B, K, h, w): (B, K, 2) (u, v) in output pixels, scores.
+
+    A parabola through the log-probabilities at the arg-max and its 4-neighbours (exact for a
+    Gaussian peak); the score is the peak probability.
+    """
+    B, K, h, w = heat.shape
+    logp = F.logsigmoid(heat).reshape(B * K, h, w).numpy().astype(np.float64)
+    idx = logp.reshape(B * K, -1).argmax(1)
+    v0, u0 = idx // w, idx % w
+    out = np.zeros((B * K, 2))
+    score = np.exp(logp.reshape(B * K, -1)[np.arange(B * K), idx])
+    for i in range(B * K):
+        off = []
+        for axis, (c, n) in enumerate(((u0[i], w), (v0[i], h))):
+            if 0 < c < n - 1:
+                if axis == 0:
+                    lm, l0, lp = logp[i, v0[i], c - 1 : c + 2]
+                else:
+                    lm, l0, lp = logp[i, c - 1 : c + 2, u0[i]]
+                den = lm - 2 * l0 + lp
+                off.append(float(np.clip(0.5 * (lm - lp) / den, -0.5, 0.5)) if den < 0 else 0.0)
+            else:
+                off.append(0.0)
+        out[i] = (u0[i] + off[0], v0[i] + off[1])
+    return out.reshape(B, K, 2), score.reshape(B, K)
+
+
+def save_weights(net: NeedleNet, path: Path, meta: dict | None = None) -> None:
+    """Write the state dict with a format tag and the architecture width."""
+    path = Path(path)
+    path.parent.mkdir(parents=True, exist_ok=True)
+    torch.save(
+        {
+            "format": WEIGHTS_FORMAT,
+            "width": net.width,
+            "state_dict": net.state_dict(),
+            "meta": dict(meta or {}),
+        },
+        path,
+    )
+
+
+def load_network(path: Path | str | None = None) -> NeedleNet:
+    """The trained network in eval mode (default: the weights shipped in the package)."""
+    path = Path(path) if path is not None else DEFAULT_WEIGHTS
+    if not path.is_file():
+        raise WeightsError(
+            f"needle network weights not found: {path} "
+            "(train them with `suture-bt train needle`, see README)"
+        )
+    try:
+        blob = torch.load(path, map_location="cpu", weights_only=True)
+    except Exception as exc:  # noqa: BLE001 - any unreadable file is reported the same way
+        raise WeightsError(f"cannot read needle network weights {path}: {exc}") from exc
+    if not isinstance(blob, dict) or blob.get("format") != WEIGHTS_FORMAT:
+        raise WeightsError(f"{path} is not a needle-network weights file ({WEIGHTS_FORMAT})")
+    net = NeedleNet(width=int(blob.get("width", 16)))
+    try:
+        net.load_state_dict(blob["state_dict"])
+    except (RuntimeError, KeyError) as exc:
+        raise WeightsError(f"weights in {path} do not match the network: {exc}") from exc
+    net.eval()
+    return net

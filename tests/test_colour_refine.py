@@ -1,0 +1,68 @@
+"""Colour refinement recovers the exact wire mask inside a coarse gate and drops thick blobs."""
+
+import cv2
+import numpy as np
+from perception_helpers import stereo
+
+from suture_bt.geometry import NeedleModel
+from suture_bt.perception.colour_refine import coarse_components, refine_mask, remove_thick
+from suture_bt.perception.needle_projection import rasterize_needle
+
+
+def _scene():
+    cam = stereo(960, 540).left
+    T = np.eye(4)
+    T[:3, 3] = (0.0, 0.0, 0.09)
+    wire = rasterize_needle(cam, T, NeedleModel())
+    rng = np.random.default_rng(0)
+    img = np.empty((540, 960, 3), np.float32)
+    img[:] = (215, 140, 132)  # tissue pink
+    img[wire] = (150, 152, 160)  # needle grey
+    img += rng.normal(0, 4, img.shape)
+    return np.clip(img, 0, 255).astype(np.uint8), wire
+
+
+def _full(view, shape):
+    out = np.zeros(shape, bool)
+    x0, y0 = view.origin
+    out[y0 : y0 + view.mask.shape[0], x0 : x0 + view.mask.shape[1]] = view.mask
+    return out
+
+
+def test_refined_mask_matches_the_wire_exactly():
+    img, wire = _scene()
+    scale = 4.0
+    small = cv2.resize(wire.astype(np.float32), (240, 135), interpolation=cv2.INTER_AREA)
+    coarse = coarse_components(small * 2.0)  # a coarse "probability" of the wire
+    view = refine_mask(img, coarse, scale)
+    full = _full(view, wire.shape)
+    assert (full != wire).sum() <= 2
+    assert view.origin[0] > 0 and view.mask.shape[1] < 960
+
+
+def test_grey_blob_outside_the_gate_is_ignored_and_thick_blob_removed():
+    img, wire = _scene()
+    img[20:60, 20:60] = (150, 152, 160)  # a grey tool far from the needle
+    ys, xs = np.nonzero(wire)
+    x, y = xs.min(), ys[np.argmin(xs)]
+    img[y - 15 : y + 15, x - 15 : x + 5] = (190, 190, 196)  # a jaw holding the needle's end
+    cov = wire.copy()
+    cov[y - 15 : y + 15, x - 15 : x + 5] = True
+    small = cv2.resize(cov.astype(np.float32), (240, 135), interpolation=cv2.INTER_AREA)
+    view = refine_mask(img, coarse_components(small * 2.0), 4.0, max_half_width_px=4.0)
+    full = _full(view, wire.shape)
+    assert not full[20:60, 20:60].any()
+    assert not full[y - 10 : y + 10, x - 12 : x].any()
+    assert (full & wire).sum() > 0.8 * wire.sum()
+
+
+def test_remove_thick_keeps_thin_lines():
+    m = np.zeros((50, 50), bool)
+    m[10:13, 5:45] = True
+    assert (remove_thick(m, 3.0) == m).all()
+
+
+def test_empty_coarse_mask_gives_empty_view():
+    img, _ = _scene()
+    view = refine_mask(img, np.zeros((135, 240), bool), 4.0)
+    assert view.mask.size == 0

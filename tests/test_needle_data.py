@@ -1,0 +1,42 @@
+"""The needle data generator renders labelled stereo pairs (via the CLI front door)."""
+
+import json
+
+import numpy as np
+
+from suture_bt.cli import main
+from suture_bt.datagen.needle_data import SCENARIOS, grasp_transform
+from suture_bt.geometry import NeedleModel
+from suture_bt.perception.network import INPUT_SIZE
+from suture_bt.perception.training import load_dataset
+
+
+def test_grasp_transform_puts_the_grasped_point_behind_the_tip():
+    model = NeedleModel()
+    a = 2.5
+    T = grasp_transform(model, a, flip=False)
+    p = T[:3, :3] @ model.point_at(a) + T[:3, 3]
+    np.testing.assert_allclose(p, (0, 0, -0.0015), atol=1e-12)
+    Tf = grasp_transform(model, a, flip=True)
+    np.testing.assert_allclose(Tf[:3, :3] @ model.point_at(a) + Tf[:3, 3], p, atol=1e-12)
+
+
+def test_data_command_writes_labelled_shards(tmp_path, capsys):
+    assert main(["data", "needle", "--n", "2", "--out", str(tmp_path), "--seed", "3"]) == 0
+    meta = json.loads(capsys.readouterr().out.strip().splitlines()[-1])
+    assert meta["n_images"] == 4 and meta["seed"] == 3
+    d = load_dataset(tmp_path)
+    w, h = INPUT_SIZE
+    assert d["images"].shape == (4, h, w, 3) and d["masks"].shape == (4, h, w)
+    assert set(d["scenario"]) <= set(range(len(SCENARIOS)))
+    for i in range(4):
+        if d["visible"][i].any():
+            assert d["masks"][i].max() > 0
+        # Visible keypoints sit on (or within a pixel or two of) the needle's mask.
+        for (u, v), vis in zip(d["keypoints"][i], d["visible"][i], strict=True):
+            if vis:
+                ui, vi = int(round(u)), int(round(v))
+                assert d["masks"][i][max(vi - 3, 0) : vi + 4, max(ui - 3, 0) : ui + 4].max() > 0
+    # Left and right images of a scene share the needle pose up to the 4 mm baseline.
+    dp = d["pose_cam"][0][:3, 3] - d["pose_cam"][1][:3, 3]
+    assert abs(np.linalg.norm(dp) - 0.004) < 1e-6

@@ -1,0 +1,82 @@
+"""The needle CNN: size, output shape, sub-pixel keypoint decoding, weights I/O and errors."""
+
+import numpy as np
+import pytest
+import torch
+
+from suture_bt.perception.network import (
+    DEFAULT_WEIGHTS,
+    INPUT_SIZE,
+    NeedleNet,
+    WeightsError,
+    count_parameters,
+    decode_keypoints,
+    load_network,
+    save_weights,
+    to_input,
+)
+
+
+def test_network_is_small_and_outputs_three_half_resolution_maps():
+    net = NeedleNet().eval()
+    assert 50_000 < count_parameters(net) < 500_000
+    w, h = INPUT_SIZE
+    with torch.inference_mode():
+        out = net(to_input(np.zeros((h, w, 3), np.uint8)))
+    assert out.shape == (1, 3, h // 2, w // 2)
+
+
+def test_decode_keypoints_is_sub_pixel():
+    h, w = 40, 60
+    yy, xx = np.mgrid[0:h, 0:w]
+    u, v = 23.3, 17.6
+    g = np.exp(-((xx - u) ** 2 + (yy - v) ** 2) / (2 * 1.5**2))
+    logits = torch.logit(torch.tensor(g * 0.98 + 0.01, dtype=torch.float32))[None, None]
+    kp, score = decode_keypoints(logits)
+    assert np.linalg.norm(kp[0, 0] - (u, v)) < 0.15
+    assert score[0, 0] > 0.9
+
+
+def test_weights_round_trip(tmp_path):
+    torch.manual_seed(0)
+    net = NeedleNet(width=8)
+    path = tmp_path / "w.pt"
+    save_weights(net, path, {"note": "test"})
+    back = load_network(path)
+    x = torch.rand(1, 3, 64, 96)
+    net.eval()
+    with torch.inference_mode():
+        assert torch.allclose(net(x), back(x))
+
+
+def test_missing_weights_error_names_the_file(tmp_path):
+    missing = tmp_path / "nope.pt"
+    with pytest.raises(WeightsError, match="nope.pt"):
+        load_network(missing)
+
+
+def test_mismatched_weights_error(tmp_path):
+    path = tmp_path / "bad.pt"
+    torch.save({"format": "something else"}, path)
+    with pytest.raises(WeightsError, match="bad.pt"):
+        load_network(path)
+    blob = {"format": "suture_bt.needle_net.v1", "width": 16, "state_dict": {"x": torch.zeros(1)}}
+    torch.save(blob, path)
+    with pytest.raises(WeightsError, match="do not match"):
+        load_network(path)
+
+
+def test_shipped_weights_load_and_run_on_a_rendered_frame():
+    if not DEFAULT_WEIGHTS.is_file():
+        pytest.fail(f"shipped weights missing: {DEFAULT_WEIGHTS}")
+    from suture_bt.sim.camera import render_view, stereo_model
+    from suture_bt.sim.world import World
+
+    net = load_network()
+    with World.from_scene() as world:
+        cam = stereo_model(640, 360).left
+        rgb = render_view(world.client, cam, with_segmentation=False).rgb
+    x = to_input(rgb[:352])
+    with torch.inference_mode():
+        out = net(x)
+    assert out.shape == (1, 3, 176, 320) and torch.isfinite(out).all()
