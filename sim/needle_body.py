@@ -40,24 +40,23 @@ def _pose(position, quat) -> np.ndarray:
     return make_transform(matrix_from_quat_xyzw(quat), position)
 
 
-def arc_inertia(model: NeedleModel, mass: float) -> tuple[np.ndarray, np.ndarray]:
-    """Centre of mass (needle frame) and principal inertia diagonal of a thin arc of wire.
+def arc_inertia(model: NeedleModel, mass: float) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Centre of mass, principal axes (columns, needle frame) and principal moments of the arc.
 
-    The needle frame's axes are principal axes of the arc only about the COM when the arc is
-    symmetric about a needle-frame axis; it is not, so the full tensor is computed and its
-    off-diagonal term is dropped (it is below 5 % of the diagonal for this arc and the needle
-    only rests, is held or frozen).
+    The arc is not symmetric about a needle-frame axis, so its inertia tensor about the COM has
+    a large x-y product term; pybullet takes a diagonal in the inertial frame, so that frame is
+    put on the principal axes.
     """
     a = np.linspace(model.base_angle, model.tip_angle, 721)
     pts = model.point_at(a)
     com = pts.mean(0)
     d = pts - com
-    m = mass / len(pts)
-    inertia = m * np.array(
-        [(d[:, 1] ** 2 + d[:, 2] ** 2).sum(), (d[:, 0] ** 2 + d[:, 2] ** 2).sum(), (d**2).sum()]
-    )
-    ring = 0.5 * mass * model.wire_radius**2  # wire cross-section, keeps all entries > 0
-    return com, inertia + ring
+    tensor = (mass / len(pts)) * (np.eye(3) * (d**2).sum() - d.T @ d)
+    moments, axes = np.linalg.eigh(tensor)
+    if np.linalg.det(axes) < 0:
+        axes[:, 2] *= -1
+    ring = 0.5 * mass * model.wire_radius**2  # wire cross-section, keeps all moments > 0
+    return com, axes, moments + ring
 
 
 class NeedleBody:
@@ -77,8 +76,10 @@ class NeedleBody:
         self.client = client
         self.model = model
         load_renderer(client)  # bodies created before the EGL plugin loads are never drawn
-        self._com, inertia = arc_inertia(model, mass)
-        self._T_needle_com = make_transform(position=self._com)
+        # The body's base frame is the needle's principal inertial frame (COM, principal axes).
+        self._com, axes, inertia = arc_inertia(model, mass)
+        self._T_needle_com = make_transform(axes, self._com)
+        T_com_needle = invert(self._T_needle_com)
         mesh = write_needle_obj(model)
         vis = p.createVisualShape(
             p.GEOM_MESH,
@@ -86,7 +87,8 @@ class NeedleBody:
             meshScale=[1.0, 1.0, 1.0],
             rgbaColor=list(NEEDLE_RGBA),
             specularColor=list(NEEDLE_SPECULAR),
-            visualFramePosition=list(-self._com),
+            visualFramePosition=list(T_com_needle[:3, 3]),
+            visualFrameOrientation=list(quat_xyzw(T_com_needle[:3, :3])),
             physicsClientId=client,
         )
         ends = model.point_at(
@@ -98,13 +100,15 @@ class NeedleBody:
         quats = []
         for d in chords / lengths[:, None]:
             x = np.cross(d, [0.0, 0.0, 1.0])
-            quats.append(list(quat_xyzw(np.stack([x, np.cross(d, x), d], 1))))
+            R_needle_capsule = np.stack([x, np.cross(d, x), d], 1)
+            quats.append(list(quat_xyzw(T_com_needle[:3, :3] @ R_needle_capsule)))
         col = p.createCollisionShapeArray(
             shapeTypes=[p.GEOM_CAPSULE] * N_COLLISION_SEGMENTS,
             radii=[model.wire_radius] * N_COLLISION_SEGMENTS,
             lengths=list(lengths),
             collisionFramePositions=[
-                list((a + b) / 2 - self._com) for a, b in zip(ends[:-1], ends[1:], strict=True)
+                list(T_com_needle[:3, :3] @ ((a + b) / 2) + T_com_needle[:3, 3])
+                for a, b in zip(ends[:-1], ends[1:], strict=True)
             ],
             collisionFrameOrientations=quats,
             physicsClientId=client,
