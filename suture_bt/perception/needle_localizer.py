@@ -34,6 +34,8 @@ from suture_bt.perception.pose_fit import MaskView, NeedleNotFound, PoseFitResul
 MIN_KEYPOINT_SCORE = 0.15
 #: Fewest full-resolution needle pixels per eye to attempt a fit.
 MIN_NEEDLE_PIXELS = 15
+#: Nearest needle distance considered (m), for the widest plausible wire in pixels.
+MIN_DEPTH = 0.05
 
 
 @dataclass(frozen=True)
@@ -90,6 +92,7 @@ class NeedleLocalizer:
         self.rule = rule or ColourRule()
         self.fitter = PoseFitter(stereo, self.model)
         self.input_width = INPUT_SIZE[0]
+        self.coarse_threshold = 0.3
 
     def network(self, left: np.ndarray, right: np.ndarray):
         """Coarse mask probabilities (2, h, w), keypoints (2, 2, 2) in full-res px, scores."""
@@ -117,21 +120,6 @@ class NeedleLocalizer:
         t0 = time.perf_counter()
         prob, kp, score, scale = self.network(left, right)
         t1 = time.perf_counter()
-        views = []
-        for eye, img in enumerate((left, right)):
-            name = ("left", "right")[eye]
-            h = int(round(img.shape[0] / scale))
-            coarse = coarse_components(prob[eye][:h])
-            if coarse.sum() == 0:
-                raise NeedleNotFound(f"the network sees no needle in the {name} image")
-            view = refine_mask(img, coarse, scale, self.rule)
-            if int(view.mask.sum()) < MIN_NEEDLE_PIXELS:
-                raise NeedleNotFound(
-                    f"too few needle-coloured pixels in the {name} image "
-                    f"({int(view.mask.sum())} < {MIN_NEEDLE_PIXELS})"
-                )
-            views.append(view)
-        t2 = time.perf_counter()
         ends = None
         depth = None
         if score[0].min() >= MIN_KEYPOINT_SCORE:
@@ -140,6 +128,25 @@ class NeedleLocalizer:
                 disp = kp[0, :, 0] - kp[1, :, 0]
                 if np.all(disp > 1.0):
                     depth = float(np.mean(self.stereo.left.fx * self.stereo.baseline / disp))
+        # Widest plausible wire (half width, px): from the disparity depth, else the nearest
+        # working distance; anything thicker touching the needle (jaws, shaft) is dropped.
+        z_min = 0.85 * depth if depth is not None else MIN_DEPTH
+        half_width = 1.35 * self.model.wire_radius * self.stereo.left.fx / max(z_min, MIN_DEPTH)
+        views = []
+        for eye, img in enumerate((left, right)):
+            name = ("left", "right")[eye]
+            h = int(round(img.shape[0] / scale))
+            coarse = coarse_components(prob[eye][:h], self.coarse_threshold)
+            if coarse.sum() == 0:
+                raise NeedleNotFound(f"the network sees no needle in the {name} image")
+            view = refine_mask(img, coarse, scale, self.rule, half_width)
+            if int(view.mask.sum()) < MIN_NEEDLE_PIXELS:
+                raise NeedleNotFound(
+                    f"too few needle-coloured pixels in the {name} image "
+                    f"({int(view.mask.sum())} < {MIN_NEEDLE_PIXELS})"
+                )
+            views.append(view)
+        t2 = time.perf_counter()
         fit = self.fitter.fit(views[0], views[1], ends, depth_hint=depth, warm_start=previous)
         t3 = time.perf_counter()
         return NeedleEstimate(

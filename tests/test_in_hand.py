@@ -1,0 +1,38 @@
+"""In-hand transform: exact round trip, grasped arc angle, and the hidden-offset caveat."""
+
+import numpy as np
+import pytest
+
+from suture_bt.datagen.needle_data import grasp_transform
+from suture_bt.geometry import NeedleModel
+from suture_bt.kinematics import forward_kinematics
+from suture_bt.perception.in_hand import estimate_in_hand, in_hand_transform
+from suture_bt.transforms import pose_to_transform
+
+BASE = pose_to_transform((0.1, 0.1346, 0.135), (0.6981, -0.5236, -np.pi))
+Q = np.array([0.3, -0.2, 0.14, 1.0, -0.3, 0.2])
+
+
+def test_in_hand_recovers_the_grasp_and_its_arc_angle():
+    model = NeedleModel()
+    T_tip_needle = grasp_transform(model, 2.6, flip=False)
+    cp = forward_kinematics(Q)
+    T_world_needle = BASE @ cp @ T_tip_needle
+    est = estimate_in_hand(T_world_needle, cp, BASE, model)
+    np.testing.assert_allclose(est.T_tip_needle, T_tip_needle, atol=1e-12)
+    assert est.grasp_arc_angle == pytest.approx(2.6, abs=0.005)
+    assert est.jaw_distance < 1e-4 and est.plausible
+
+
+def test_uncompensated_offset_biases_the_in_hand_transform():
+    model = NeedleModel()
+    true_cp = forward_kinematics(Q)
+    T_world_needle = BASE @ true_cp @ grasp_transform(model, 2.6, flip=False)
+    measured_cp = forward_kinematics(Q - np.array([np.deg2rad(2.0), 0, 0.003, 0, 0, 0]))
+    est = estimate_in_hand(T_world_needle, measured_cp, BASE, model)
+    assert est.jaw_distance > 0.003 and not est.plausible
+
+
+def test_bad_input_is_rejected():
+    with pytest.raises(ValueError, match="measured_cp"):
+        in_hand_transform(np.eye(4), np.full((4, 4), np.nan), np.eye(4))
