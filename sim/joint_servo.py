@@ -33,6 +33,7 @@ exactly, for tests that need an exact arm.
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass
 
 import numpy as np
@@ -75,6 +76,9 @@ class JointServo:
         self.kd = 2 * self.params.damping_ratio * w
         self.friction = self.kp * self.params.error_scale
         self.effort = np.zeros(6)
+        self._friction = self.friction.tolist()
+        self._lo = JOINT_LIMITS[:, 0].tolist()
+        self._hi = JOINT_LIMITS[:, 1].tolist()
 
     def reset(self, q) -> None:
         """Put the joints at rest at q, with the set-point there too."""
@@ -85,9 +89,9 @@ class JointServo:
     def load(self, q: np.ndarray) -> np.ndarray:
         """Configuration-dependent load (per unit inertia) on each joint."""
         g = np.zeros(6)
-        s = 0.5 * self.params.gravity_load * self.friction
-        g[1] = s[1] * np.cos(q[1]) * (q[2] / 0.15)
-        g[2] = s[2] * np.cos(q[1]) * np.cos(q[0])
+        s = 0.5 * self.params.gravity_load
+        g[1] = s * self._friction[1] * math.cos(q[1]) * (q[2] / 0.15)
+        g[2] = s * self._friction[2] * math.cos(q[1]) * math.cos(q[0])
         return g
 
     def step(self, dt: float) -> None:
@@ -97,20 +101,32 @@ class JointServo:
             self.q = self.setpoint.copy()
             self.effort = np.zeros(6)
             return
-        drive = self.kp * (self.setpoint - self.q) - self.kd * self.qd - self.load(self.q)
-        moving = np.abs(self.qd) > _STICK_VELOCITY
-        stuck = ~moving & (np.abs(drive) <= self.friction)
-        direction = np.where(moving, np.sign(self.qd), np.sign(drive))
-        acc = np.where(stuck, 0.0, drive - self.friction * direction)
-        qd_new = self.qd + acc * dt
-        # Friction cannot reverse the motion within one step: stop at zero velocity instead.
-        crossed = moving & (np.sign(qd_new) != np.sign(self.qd)) & (np.abs(drive) <= self.friction)
-        qd_new = np.where(stuck | crossed, 0.0, qd_new)
-        self.qd = qd_new
-        self.q = self.q + self.qd * dt
-        self.effort = drive
-        # The joint stops at its mechanical limits.
-        lo, hi = JOINT_LIMITS[:, 0], JOINT_LIMITS[:, 1]
-        at_limit = (self.q < lo) | (self.q > hi)
-        self.q = np.clip(self.q, lo, hi)
-        self.qd = np.where(at_limit, 0.0, self.qd)
+        # Six scalar joints: a plain loop is several times faster than numpy on 6-vectors.
+        q, qd, sp = self.q.tolist(), self.qd.tolist(), self.setpoint.tolist()
+        load = self.load(self.q).tolist()
+        kp, kd = self.kp, self.kd
+        q_new, qd_new, effort = [0.0] * 6, [0.0] * 6, [0.0] * 6
+        for i in range(6):
+            f = self._friction[i]
+            drive = kp * (sp[i] - q[i]) - kd * qd[i] - load[i]
+            effort[i] = drive
+            v = qd[i]
+            if abs(v) > _STICK_VELOCITY:
+                v_next = v + (drive - f * math.copysign(1.0, v)) * dt
+                # Friction cannot reverse the motion within one step: stop there instead.
+                if (v_next > 0.0) != (v > 0.0) and abs(drive) <= f:
+                    v_next = 0.0
+            elif abs(drive) <= f:
+                v_next = 0.0  # stuck: static friction holds the joint
+            else:
+                v_next = v + (drive - math.copysign(f, drive)) * dt
+            x = q[i] + v_next * dt
+            # The joint stops at its mechanical limits.
+            if x < self._lo[i]:
+                x, v_next = self._lo[i], 0.0
+            elif x > self._hi[i]:
+                x, v_next = self._hi[i], 0.0
+            q_new[i], qd_new[i] = x, v_next
+        self.q = np.array(q_new)
+        self.qd = np.array(qd_new)
+        self.effort = np.array(effort)

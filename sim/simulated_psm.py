@@ -54,7 +54,7 @@ class MinJerkTrajectory:
         return cls(q0, q1, t0, duration)
 
     def sample(self, t: float) -> np.ndarray:
-        s = np.clip((t - self.t0) / self.duration, 0.0, 1.0)
+        s = min(1.0, max(0.0, (t - self.t0) / self.duration))
         blend = 10 * s**3 - 15 * s**4 + 6 * s**5
         return self.q0 + (self.q1 - self.q0) * blend
 
@@ -129,9 +129,9 @@ class SimulatedJaw:
     def update(self, dt: float) -> None:
         """Advance the jaw by one physics step."""
         step = MAX_JAW_SPEED * dt
-        self._setpoint += float(np.clip(self._target - self._setpoint, -step, step))
+        self._setpoint += min(step, max(-step, self._target - self._setpoint))
         goal = max(self._setpoint, self.min_angle)
-        self._angle += float(np.clip(goal - self._angle, -step, step))
+        self._angle += min(step, max(-step, goal - self._angle))
 
 
 class SimulatedPSM:
