@@ -1,0 +1,99 @@
+"""The 4 calibration keypoints on the PSM wrist and jaw, and their 3-D positions for joint vectors.
+
+Why these points: they are rigid features of the instrument's last links that a camera sees
+(the wrist-pitch clevis axle, the wrist-yaw axle and the two jaw tips), they are not collinear
+once the jaw is open, and they span the wrist so that their image encodes the wrist's position
+and orientation — which, with joints 4-6 and the jaw read exactly from the encoders, fixes the
+biased joints 1-3 (DESIGN.md §5).
+
+Definitions (modified-DH frames of ``suture_bt.kinematics``):
+
+0. ``wrist_pitch``: origin of frame 5 (on the wrist-pitch axis, at the end of the shaft);
+1. ``wrist_yaw``: origin of frame 6 (on the wrist-yaw axis, where both jaws pivot);
+2. ``jaw_tip_a`` / 3. ``jaw_tip_b``: the two jaw tips, ``JAW_TIP_LENGTH`` from the yaw axis
+   along each jaw. The jaws open symmetrically about the tip frame's z (frame 6 y), each by
+   half the jaw angle about the yaw axis (frame 6 z); jaw a to frame 6 −x, jaw b to +x.
+
+Everything is vectorised over a batch of joint vectors (N×6) for data generation.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from suture_bt.kinematics.psm import L_PITCH2YAW, L_RCC, L_TOOL
+
+KEYPOINT_NAMES = ("wrist_pitch", "wrist_yaw", "jaw_tip_a", "jaw_tip_b")
+NUM_KEYPOINTS = len(KEYPOINT_NAMES)
+#: Distance from the wrist-yaw axis to each jaw tip along the jaw (m); matches the sim's jaws.
+JAW_TIP_LENGTH = 0.0106
+
+
+def _dh_batch(alpha: float, a: float, theta: np.ndarray, d: np.ndarray) -> np.ndarray:
+    """Batch of modified-DH transforms Rx(α)·Tx(a)·Rz(θ)·Tz(d), shape N×4×4."""
+    n = theta.shape[0]
+    ca, sa = np.cos(alpha), np.sin(alpha)
+    ct, st = np.cos(theta), np.sin(theta)
+    T = np.zeros((n, 4, 4))
+    T[:, 0, 0], T[:, 0, 1], T[:, 0, 3] = ct, -st, a
+    T[:, 1, 0], T[:, 1, 1], T[:, 1, 2], T[:, 1, 3] = st * ca, ct * ca, -sa, -sa * d
+    T[:, 2, 0], T[:, 2, 1], T[:, 2, 2], T[:, 2, 3] = st * sa, ct * sa, ca, ca * d
+    T[:, 3, 3] = 1.0
+    return T
+
+
+def wrist_frames(q: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Base-frame transforms of frames 5 and 6 (N×4×4 each) for joint vectors q (N×6)."""
+    q = np.atleast_2d(np.asarray(q, dtype=float))
+    if q.shape[1] < 6:
+        raise ValueError(f"joint vectors need 6 values, got {q.shape[1]}")
+    h = np.pi / 2
+    zero = np.zeros(q.shape[0])
+    T = _dh_batch(h, 0.0, q[:, 0] + h, zero)
+    T = T @ _dh_batch(-h, 0.0, q[:, 1] - h, zero)
+    T = T @ _dh_batch(h, 0.0, zero, q[:, 2] - L_RCC)
+    T = T @ _dh_batch(0.0, 0.0, q[:, 3], zero + L_TOOL)
+    T5 = T @ _dh_batch(-h, 0.0, q[:, 4] - h, zero)
+    T6 = T5 @ _dh_batch(-h, L_PITCH2YAW, q[:, 5] - h, zero)
+    return T5, T6
+
+
+def keypoints_in_frame6(jaw: np.ndarray) -> np.ndarray:
+    """The 4 keypoints in frame 6 (N×4×3) for jaw angles (N,) in rad."""
+    jaw = np.atleast_1d(np.asarray(jaw, dtype=float))
+    half = jaw / 2.0
+    pts = np.zeros((jaw.shape[0], NUM_KEYPOINTS, 3))
+    pts[:, 2] = np.stack([-np.sin(half), np.cos(half), 0 * half], 1) * JAW_TIP_LENGTH
+    pts[:, 3] = np.stack([np.sin(half), np.cos(half), 0 * half], 1) * JAW_TIP_LENGTH
+    return pts
+
+
+def keypoints_in_base(q, jaw) -> np.ndarray:
+    """Keypoints (N×4×3) in the base (RCM) frame for joints q (N×6 or 6), jaw (N or scalar)."""
+    q = np.atleast_2d(np.asarray(q, dtype=float))
+    jaw = np.broadcast_to(np.asarray(jaw, dtype=float), (q.shape[0],))
+    T5, T6 = wrist_frames(q)
+    local = keypoints_in_frame6(jaw)
+    out = np.einsum("nij,nkj->nki", T6[:, :3, :3], local) + T6[:, None, :3, 3]
+    out[:, 0] = T5[:, :3, 3]
+    return out
+
+
+def keypoints_in_world(q, jaw, T_world_base: np.ndarray) -> np.ndarray:
+    """Keypoints (N×4×3) in the world frame."""
+    pb = keypoints_in_base(q, jaw)
+    return pb @ T_world_base[:3, :3].T + T_world_base[:3, 3]
+
+
+def project_keypoints(q, jaw, T_world_base: np.ndarray, camera) -> np.ndarray:
+    """Pixel coordinates (N×4×2) of the keypoints in ``camera`` (a CameraModel)."""
+    pw = keypoints_in_world(q, jaw, T_world_base)
+    n = pw.shape[0]
+    return camera.project(pw.reshape(-1, 3)).reshape(n, NUM_KEYPOINTS, 2)
+
+
+def keypoint_depths(q, jaw, T_world_base: np.ndarray, camera) -> np.ndarray:
+    """Depth (camera z, m) of each keypoint, N×4; positive in front of the camera."""
+    pw = keypoints_in_world(q, jaw, T_world_base)
+    n = pw.shape[0]
+    return camera.to_camera(pw.reshape(-1, 3))[:, 2].reshape(n, NUM_KEYPOINTS)

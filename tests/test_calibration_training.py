@@ -1,0 +1,41 @@
+"""Regressor training on projected keypoints: data follow the offset model; a short run learns."""
+
+import numpy as np
+
+from suture_bt.calibration.calibration_pose import CALIBRATION_JAW, OFFSET_BOUND
+from suture_bt.calibration.jaw_keypoints import project_keypoints
+from suture_bt.calibration.scene_geometry import PSM_BASES, endoscope_model
+from suture_bt.calibration.training import projected_dataset, train_arm, train_regressor
+
+
+def test_projected_data_are_keypoints_of_measured_plus_offset():
+    d = projected_dataset("psm1", 50, seed=3)
+    assert np.all(np.abs(d.offsets) <= OFFSET_BOUND)
+    q = d.q_meas.copy()
+    q[:, :3] += d.offsets
+    px = project_keypoints(q, CALIBRATION_JAW, PSM_BASES["psm1"], endoscope_model().left)
+    np.testing.assert_allclose(d.pixels, px)
+    again = projected_dataset("psm1", 50, seed=3)
+    np.testing.assert_array_equal(again.offsets, d.offsets)
+
+
+def test_short_training_beats_predicting_zero():
+    data = projected_dataset("psm2", 3000, seed=1)
+    model = train_arm("psm2", data, epochs=6, seed=0, progress=False)
+    test = projected_dataset("psm2", 300, seed=2)
+    from suture_bt.calibration.offset_regressor import regressor_features
+
+    pred = model.predict(regressor_features("psm2", test.pixels, test.q_meas))
+    err = np.abs(pred - test.offsets).mean(0)
+    baseline = np.abs(test.offsets).mean(0)
+    assert np.all(err < 0.2 * baseline), (err, baseline)
+
+
+def test_training_is_seeded():
+    a = train_regressor(200, seed=4, epochs=1, progress=False)
+    b = train_regressor(200, seed=4, epochs=1, progress=False)
+    x = np.zeros((1, 4, 2)) + 700.0
+    q = np.array(a.meta["poses"]["psm1"])[None]
+    np.testing.assert_array_equal(
+        a.predict("psm1", x, 1920, 1080, q), b.predict("psm1", x, 1920, 1080, q)
+    )

@@ -1,0 +1,58 @@
+"""Jaw keypoints: positions agree with the DH kinematics, jaw tips are symmetric and distinct."""
+
+import numpy as np
+import pytest
+
+from suture_bt.calibration.calibration_pose import CALIBRATION_JAW, CALIBRATION_POSES
+from suture_bt.calibration.jaw_keypoints import (
+    JAW_TIP_LENGTH,
+    keypoints_in_base,
+    keypoints_in_world,
+    project_keypoints,
+)
+from suture_bt.calibration.scene_geometry import PSM_BASES, endoscope_model
+from suture_bt.kinematics import frame_transforms
+
+
+def test_wrist_keypoints_are_frame_origins_of_the_dh_chain(rng):
+    q = rng.uniform(-0.8, 0.8, (5, 6))
+    q[:, 2] = rng.uniform(0.05, 0.2, 5)
+    kp = keypoints_in_base(q, 0.5)
+    for i in range(5):
+        frames = frame_transforms(q[i])
+        np.testing.assert_allclose(kp[i, 0], frames[4][:3, 3], atol=1e-12)
+        np.testing.assert_allclose(kp[i, 1], frames[5][:3, 3], atol=1e-12)
+
+
+def test_closed_jaw_tips_coincide_with_the_tool_tip_direction():
+    q = CALIBRATION_POSES["psm1"]
+    kp = keypoints_in_base(q, 0.0)[0]
+    np.testing.assert_allclose(kp[2], kp[3], atol=1e-12)
+    tip = frame_transforms(q)[-1][:3, 3]  # control point at L_yaw2ctrlpnt along the jaw
+    direction = (tip - kp[1]) / np.linalg.norm(tip - kp[1])
+    np.testing.assert_allclose(kp[2], kp[1] + JAW_TIP_LENGTH * direction, atol=1e-12)
+
+
+def test_open_jaw_tips_are_symmetric_and_the_four_points_not_collinear():
+    q = CALIBRATION_POSES["psm2"]
+    kp = keypoints_in_base(q, CALIBRATION_JAW)[0]
+    da, db = kp[2] - kp[1], kp[3] - kp[1]
+    assert np.linalg.norm(da) == pytest.approx(JAW_TIP_LENGTH)
+    assert np.degrees(np.arccos(da @ db / JAW_TIP_LENGTH**2)) == pytest.approx(
+        np.degrees(CALIBRATION_JAW)
+    )
+    centred = kp - kp.mean(0)
+    assert np.linalg.svd(centred, compute_uv=False)[1] > 1e-3  # rank ≥ 2: not collinear
+
+
+def test_projection_matches_the_camera_model():
+    cam = endoscope_model(640, 480).left
+    q = CALIBRATION_POSES["psm1"]
+    pw = keypoints_in_world(q, CALIBRATION_JAW, PSM_BASES["psm1"])[0]
+    px = project_keypoints(q, CALIBRATION_JAW, PSM_BASES["psm1"], cam)[0]
+    np.testing.assert_allclose(px, cam.project(pw))
+
+
+def test_rejects_short_joint_vectors():
+    with pytest.raises(ValueError, match="6 values"):
+        keypoints_in_base(np.zeros((2, 3)), 0.1)
