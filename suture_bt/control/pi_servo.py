@@ -127,6 +127,7 @@ class PIServo:
         self.direction = np.zeros(NUM_JOINTS, dtype=int)
         self._memory = np.zeros((2, NUM_JOINTS))  # integrator per direction: [−, +]
         self._learned = np.zeros((2, NUM_JOINTS), dtype=bool)
+        self._moving = np.zeros(NUM_JOINTS, dtype=bool)
         self.correction = np.zeros(NUM_JOINTS)
         self.output = np.zeros(NUM_JOINTS)
         self.commanded = np.zeros(NUM_JOINTS)
@@ -160,6 +161,7 @@ class PIServo:
         self.direction[:] = 0
         self._memory[:] = 0.0
         self._learned[:] = False
+        self._moving[:] = False
         self._previous_desired = None
         self.desired = self.estimated_jp() if hold_current else None
 
@@ -194,6 +196,8 @@ class PIServo:
             self.saturated = np.abs(excess) > 1e-15
             hold = self.saturated & (np.sign(e) == np.sign(excess))
             self.integrator = np.where(hold, self.integrator, integ)
+            if g.direction_memory:
+                self._remember_direction()
         else:
             out = np.clip(q_d, lo, hi)
             self.saturated = out != q_d
@@ -204,30 +208,36 @@ class PIServo:
         self.updates += 1
 
     def _switch_direction(self, velocity: np.ndarray) -> None:
-        """Swap in the integrator learned for the new direction of motion, per joint.
+        """Swap in the integrator learned while moving in the new direction, per joint.
 
         Coulomb friction flips sign with the direction of motion, so the integral term that
         holds a joint against friction (and load) while it moves one way is wrong by twice the
-        friction the other way; integrating that difference away at every reversal is what
-        makes a PI loop lag on a stiction plant. Each joint keeps one integrator per direction
-        of its desired motion (ignoring speeds inside ``direction_deadband``); a direction not
-        yet seen starts from the mirror image of the other one (friction-dominated guess).
+        friction the other way; and after a hold it has relaxed to anywhere inside the friction
+        band. Integrating that difference away whenever a joint starts or reverses is what
+        makes a PI loop lag on a stiction plant. So each joint remembers the integrator of its
+        last motion in each direction (speeds inside ``direction_deadband`` count as rest) and
+        starts every motion from it; a direction never seen starts from the mirror image of the
+        other one (a friction-dominated guess).
         """
-        new = np.where(
-            velocity > self.gains.direction_deadband,
-            1,
-            np.where(velocity < -self.gains.direction_deadband, -1, self.direction),
-        )
-        for j in np.nonzero((new != self.direction) & (new != 0))[0]:
-            old, nxt = self.direction[j], new[j]
-            if old != 0:
-                self._memory[(old + 1) // 2, j] = self.integrator[j]
-                self._learned[(old + 1) // 2, j] = True
-                k = (nxt + 1) // 2
-                self.integrator[j] = (
-                    self._memory[k, j] if self._learned[k, j] else -self.integrator[j]
-                )
+        db = self.gains.direction_deadband
+        moving = np.abs(velocity) > db
+        new = np.where(moving, np.sign(velocity).astype(int), self.direction)
+        starting = moving & (~self._moving | (new != self.direction))
+        for j in np.nonzero(starting)[0]:
+            k = (new[j] + 1) // 2
+            if self._learned[k, j]:
+                self.integrator[j] = self._memory[k, j]
+            elif self.direction[j] != 0 and new[j] != self.direction[j]:
+                self.integrator[j] = -self.integrator[j]
         self.direction = new
+        self._moving = moving
+
+    def _remember_direction(self) -> None:
+        """Store the integrator of every moving joint as the one for its direction."""
+        for j in np.nonzero(self._moving)[0]:
+            k = (self.direction[j] + 1) // 2
+            self._memory[k, j] = self.integrator[j]
+            self._learned[k, j] = True
 
     def attach(self, add_periodic: Callable[[float, Callable[[float], None]], object]) -> object:
         """Register :meth:`update` at this rate: ``servo.attach(world.add_periodic)``."""
