@@ -202,3 +202,27 @@ def test_direction_memory_removes_most_of_the_lag_at_motion_reversals():
     with_memory, without = _reversal_error(True), _reversal_error(False)
     assert with_memory < 0.25 * without
     assert with_memory < np.deg2rad(0.2)
+
+
+def _restart_error(direction_memory: bool) -> float:
+    """Peak joint-1 error of the 3rd ramp of ramp-hold-ramp-hold-ramp motion on stiction."""
+    arm = StictionArm()
+    pi = PIServo(arm, gains=PIGains(direction_memory=direction_memory))
+    every = round(pi.dt / PHYSICS_DT)
+    peak, q1 = 0.0, Q0[0]
+    for k in range(round(3.0 / PHYSICS_DT)):
+        t = k * PHYSICS_DT
+        if k % every == 0:
+            if (t % 1.0) < 0.5:  # 0.5 s at 0.2 rad/s, then 0.5 s of hold
+                q1 += 0.2 * pi.dt
+            pi.servo_jp(np.r_[q1, Q0[1:]])
+            pi.update(t)
+        arm.physics_step()
+        if t > 2.0:
+            peak = max(peak, abs(pi.desired[0] - arm.q[0]))
+    return peak
+
+
+def test_motion_restarts_from_the_integrator_of_the_last_motion_not_of_the_hold():
+    with_memory, without = _restart_error(True), _restart_error(False)
+    assert with_memory < 0.2 * without and with_memory < np.deg2rad(0.1)
