@@ -1,5 +1,6 @@
 """Motion stack in the real World: PI servo + offset compensation + Cartesian moves to the ports,
-and planned needle insertions scored by the phantom's crossing records (issue 3, "Done when").
+planned needle insertions scored by the phantom's crossing records (issue 3, "Done when"), and
+the other arm pulling the needle through along the planned extraction.
 
 Ground truth is used here only to set Δq̂ to the true offset and to read the true tip/needle.
 """
@@ -97,15 +98,9 @@ SWEEP = {"angular_speed": 0.6, "angular_acc": 2.4}
 
 
 def phantom_recorder(world):
-    """The world's phantom bookkeeping, or (until the world wires it) one updated per step."""
-    if world.phantom is not None:
-        return world.phantom
-    from suture_bt.sim.phantom_body import PhantomBody
-
-    truth = GroundTruth(world)
-    body = PhantomBody(world.client, world.task.phantom, world.task.needle)
-    world.add_periodic(world.dt, lambda t: body.update(truth.needle_pose(), t))
-    return body
+    """The world's phantom bookkeeping: port crossings, tip out past exits, tissue strain."""
+    assert world.phantom is not None
+    return world.phantom
 
 
 def throw_passes(recorder, pair: int) -> tuple[bool, str]:
