@@ -5,6 +5,7 @@ import pytest
 
 from suture_bt.calibration.calibration_pose import CALIBRATION_JAW, CALIBRATION_POSES
 from suture_bt.calibration.jaw_keypoints import (
+    JAW_HALF_THICKNESS,
     JAW_TIP_LENGTH,
     keypoints_in_base,
     keypoints_in_world,
@@ -24,22 +25,29 @@ def test_wrist_keypoints_are_frame_origins_of_the_dh_chain(rng):
         np.testing.assert_allclose(kp[i, 1], frames[5][:3, 3], atol=1e-12)
 
 
-def test_closed_jaw_tips_coincide_with_the_tool_tip_direction():
+def test_closed_jaw_tips_straddle_the_tool_tip_direction():
     q = CALIBRATION_POSES["psm1"]
     kp = keypoints_in_base(q, 0.0)[0]
-    np.testing.assert_allclose(kp[2], kp[3], atol=1e-12)
-    tip = frame_transforms(q)[-1][:3, 3]  # control point at L_yaw2ctrlpnt along the jaw
+    assert np.linalg.norm(kp[2] - kp[3]) == pytest.approx(2 * JAW_HALF_THICKNESS)
+    tip = frame_transforms(q)[-1][:3, 3]  # control point, along the closed jaw
     direction = (tip - kp[1]) / np.linalg.norm(tip - kp[1])
-    np.testing.assert_allclose(kp[2], kp[1] + JAW_TIP_LENGTH * direction, atol=1e-12)
+    mid = (kp[2] + kp[3]) / 2
+    np.testing.assert_allclose(mid, kp[1] + JAW_TIP_LENGTH * direction, atol=1e-12)
 
 
-def test_open_jaw_tips_are_symmetric_and_the_four_points_not_collinear():
+def test_open_jaw_tips_are_mirror_images_and_the_four_points_not_collinear():
     q = CALIBRATION_POSES["psm2"]
     kp = keypoints_in_base(q, CALIBRATION_JAW)[0]
     da, db = kp[2] - kp[1], kp[3] - kp[1]
-    assert np.linalg.norm(da) == pytest.approx(JAW_TIP_LENGTH)
-    assert np.degrees(np.arccos(da @ db / JAW_TIP_LENGTH**2)) == pytest.approx(
-        np.degrees(CALIBRATION_JAW)
+    reach = np.hypot(JAW_TIP_LENGTH, JAW_HALF_THICKNESS)
+    assert np.linalg.norm(da) == pytest.approx(reach)
+    assert np.linalg.norm(db) == pytest.approx(reach)
+    tip = frame_transforms(q)[-1][:3, 3]
+    bisector = (tip - kp[1]) / np.linalg.norm(tip - kp[1])
+    assert da @ bisector == pytest.approx(db @ bisector)  # symmetric about the jaw axis
+    opening = np.arccos(da @ db / reach**2)
+    assert opening == pytest.approx(
+        CALIBRATION_JAW + 2 * np.arctan2(JAW_HALF_THICKNESS, JAW_TIP_LENGTH)
     )
     centred = kp - kp.mean(0)
     assert np.linalg.svd(centred, compute_uv=False)[1] > 1e-3  # rank ≥ 2: not collinear

@@ -10,9 +10,11 @@ Definitions (modified-DH frames of ``suture_bt.kinematics``):
 
 0. ``wrist_pitch``: origin of frame 5 (on the wrist-pitch axis, at the end of the shaft);
 1. ``wrist_yaw``: origin of frame 6 (on the wrist-yaw axis, where both jaws pivot);
-2. ``jaw_tip_a`` / 3. ``jaw_tip_b``: the two jaw tips, ``JAW_TIP_LENGTH`` from the yaw axis
-   along each jaw. The jaws open symmetrically about the tip frame's z (frame 6 y), each by
-   half the jaw angle about the yaw axis (frame 6 z); jaw a to frame 6 −x, jaw b to +x.
+2. ``jaw_tip_a`` / 3. ``jaw_tip_b``: the centres of the two jaw blades' end faces. Blade a
+   turns by +jaw/2 and blade b by −jaw/2 about the yaw axis (frame 6 z); in its own turned
+   frame each blade runs along +y to ``JAW_TIP_LENGTH`` and sits ``JAW_HALF_THICKNESS`` to the
+   −x (a) or +x (b) side of the frame-6 y-z plane, as the sim's blades do
+   (``suture_bt.sim.psm_body``: JAW_LENGTH, JAW_THICKNESS).
 
 Everything is vectorised over a batch of joint vectors (N×6) for data generation.
 """
@@ -25,8 +27,9 @@ from suture_bt.kinematics.psm import L_PITCH2YAW, L_RCC, L_TOOL
 
 KEYPOINT_NAMES = ("wrist_pitch", "wrist_yaw", "jaw_tip_a", "jaw_tip_b")
 NUM_KEYPOINTS = len(KEYPOINT_NAMES)
-#: Distance from the wrist-yaw axis to each jaw tip along the jaw (m); matches the sim's jaws.
-JAW_TIP_LENGTH = 0.0106
+#: Jaw blade length from the wrist-yaw axis and half its thickness (m), as the sim's blades.
+JAW_TIP_LENGTH = 0.0125
+JAW_HALF_THICKNESS = 0.0006
 
 
 def _dh_batch(alpha: float, a: float, theta: np.ndarray, d: np.ndarray) -> np.ndarray:
@@ -61,10 +64,13 @@ def wrist_frames(q: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
 def keypoints_in_frame6(jaw: np.ndarray) -> np.ndarray:
     """The 4 keypoints in frame 6 (N×4×3) for jaw angles (N,) in rad."""
     jaw = np.atleast_1d(np.asarray(jaw, dtype=float))
-    half = jaw / 2.0
     pts = np.zeros((jaw.shape[0], NUM_KEYPOINTS, 3))
-    pts[:, 2] = np.stack([-np.sin(half), np.cos(half), 0 * half], 1) * JAW_TIP_LENGTH
-    pts[:, 3] = np.stack([np.sin(half), np.cos(half), 0 * half], 1) * JAW_TIP_LENGTH
+    for k, side in ((2, 1.0), (3, -1.0)):
+        a = side * jaw / 2.0  # blade a turns +jaw/2, blade b −jaw/2 about frame-6 z
+        x, y = -side * JAW_HALF_THICKNESS, JAW_TIP_LENGTH
+        pts[:, k] = np.stack(
+            [np.cos(a) * x - np.sin(a) * y, np.sin(a) * x + np.cos(a) * y, 0 * a], 1
+        )
     return pts
 
 
