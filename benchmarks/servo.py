@@ -62,11 +62,10 @@ def run(pi: bool, targets: dict[str, np.ndarray], hold: float) -> dict[str, dict
                 st = moves[a].start()
                 if st.failed:
                     raise RuntimeError(f"{a} move {k}: {st.reason}")
+                servos[a].follow(moves[a])  # the servo advances the move at its rate
             duration = max(m.duration for m in moves.values()) + hold
             n = int(round(duration / dt))
             for i in range(n):
-                for m in moves.values():
-                    m.step(dt)
                 world.step(dt)
                 for a in ARMS:
                     e = truth.joint_positions(a) - servos[a].setpoint_jp()

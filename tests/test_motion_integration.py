@@ -25,7 +25,6 @@ from suture_bt.transforms import make_transform
 
 #: PSM2 (at −x) serves the entries, PSM1 (at +x) the exits.
 ARM_FOR_KIND = {"entry": "psm2", "exit": "psm1"}
-PI_DT = 0.005
 
 
 def port_goal(port) -> np.ndarray:
@@ -39,17 +38,16 @@ def port_goal(port) -> np.ndarray:
 
 
 def drive(world, moves, settle: float, limit: float = 20.0) -> dict[str, MoveStatus]:
-    """Step moves and world in PI periods until all moves end, then hold for ``settle`` s."""
-    status = {}
+    """Hand started moves to their PI servos, step the world in 50 ms ticks until all end,
+    then hold for ``settle`` s (the servos advance the moves at their own rate)."""
+    for m in moves.values():
+        m.sink.follow(m)
     t = 0.0
-    while t < limit:
-        status = {name: m.step(PI_DT) for name, m in moves.items()}
-        world.step(PI_DT)
-        t += PI_DT
-        if all(s.done or s.failed for s in status.values()):
-            break
+    while t < limit and not all(m.status.done or m.status.failed for m in moves.values()):
+        world.step(0.05)
+        t += 0.05
     world.step(settle)
-    return status
+    return {name: m.status for name, m in moves.items()}
 
 
 @pytest.mark.parametrize("condition", ["B", "C"])

@@ -226,3 +226,32 @@ def _restart_error(direction_memory: bool) -> float:
 def test_motion_restarts_from_the_integrator_of_the_last_motion_not_of_the_hold():
     with_memory, without = _restart_error(True), _restart_error(False)
     assert with_memory < 0.2 * without and with_memory < np.deg2rad(0.1)
+
+
+def test_followed_move_runs_at_the_loop_rate_whatever_the_callers_step():
+    from suture_bt.planning import JointMove
+
+    def run_with_chunks(chunk):
+        arm = LaggingArm()
+        pi = PIServo(arm)
+        move = JointMove(pi, Q0 + np.array([0.2, -0.1, 0.01, 0.3, 0.2, -0.2]))
+        move.start(Q0)
+        pi.follow(move)
+        trace, k = [], 0
+        every = round(pi.dt / PHYSICS_DT)
+        while k * PHYSICS_DT < move.duration + 0.5:
+            for _ in range(round(chunk / PHYSICS_DT)):  # the world stepping one "tick"
+                if k % every == 0:
+                    pi.update(k * PHYSICS_DT)
+                arm.physics_step()
+                k += 1
+            trace.append(arm.q.copy())
+        return move, pi, np.array(trace)
+
+    fine_move, _, fine = run_with_chunks(0.005)
+    coarse_move, coarse_pi, coarse = run_with_chunks(0.05)
+    assert fine_move.status.done and coarse_move.status.done and coarse_pi.source is None
+    np.testing.assert_array_equal(fine[9::10][: len(coarse)], coarse[: len(fine[9::10])])
+    np.testing.assert_allclose(coarse[-1], fine_move.waypoints[-1], atol=1e-5)
+    with pytest.raises(ValueError, match="sink"):
+        PIServo(LaggingArm()).follow(fine_move)

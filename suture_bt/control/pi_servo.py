@@ -136,6 +136,8 @@ class PIServo:
         self.saturated = np.zeros(NUM_JOINTS, dtype=bool)
         self.updates = 0
         self.last_time: float | None = None
+        #: A move (anything with ``step(dt)`` returning a status) advanced by every update.
+        self.source = None
 
     # -- setpoints -------------------------------------------------------------------------
     def servo_jp(self, q_desired) -> None:
@@ -167,10 +169,31 @@ class PIServo:
         self._previous_desired = None
         self.desired = self.estimated_jp() if hold_current else None
 
+    def follow(self, move) -> None:
+        """Advance ``move`` (a started trajectory whose sink is this servo) at the loop's rate.
+
+        The move then produces one setpoint per update, in simulated time, however coarsely
+        the caller steps the world (a behaviour-tree tick of 50 ms gives the same motion as
+        5 ms steps); the caller polls ``move.status``. A new ``follow`` replaces the old move.
+        """
+        if getattr(move, "sink", self) is not self:
+            raise ValueError("the move feeds another sink; build it with this servo as sink")
+        if not getattr(move, "started", True):
+            raise ValueError("start the move before handing it to the servo")
+        self.source = move
+
+    def stop_following(self) -> None:
+        """Drop the followed move; the last desired value is held."""
+        self.source = None
+
     # -- the loop --------------------------------------------------------------------------
     def update(self, t: float | None = None) -> None:
         """One loop iteration: read, compute, send (signature fits ``world.add_periodic``)."""
         self.last_time = t
+        if self.source is not None:
+            st = self.source.step(self.dt)
+            if st.done or st.failed:
+                self.source = None
         self.measured = np.asarray(self.arm.measured_jp(), dtype=float).copy()
         self.estimate = true_from_measured(self.measured, self.offset_estimate)
         if self.desired is None:
