@@ -152,11 +152,8 @@ def insert(world, servo: PIServo, pair: int):
     arc = plan_needle_arc(entry, exit_, world.task.needle)
     arc.check_grasp(T_gn)
     base = world.psm2.base_frame()
-    phi0 = -PRE_ARC / arc.needle.radius
-    T_pre = arc.needle_pose(phi0) @ np.linalg.inv(T_gn)
-    T_lift = T_pre.copy()
-    T_lift[:3, 3] += LIFT * entry.normal
-    goals = [to_base(T_lift, base), to_base(T_pre, base)]
+    phi0 = arc.pre_insertion_angle(PRE_ARC)
+    goals = [to_base(T @ np.linalg.inv(T_gn), base) for T in arc.approach_poses(PRE_ARC, LIFT)]
     approach = CartesianMove(servo, goals, v_lin=0.08, a_lin=0.4, v_ang=1.2, a_ang=4.0)
     st = approach.start()
     assert not st.failed, st.reason

@@ -134,3 +134,17 @@ def test_gripper_poses_and_grasp_check():
     near_tip = invert(make_transform(np.eye(3), needle.point_at(needle.tip_angle + np.deg2rad(60))))
     with pytest.raises(NeedleArcError, match="grasp point"):
         arc.check_grasp(near_tip)
+
+
+def test_approach_poses_come_down_the_entry_normal_to_the_tip_before_the_entry():
+    arc = plan_needle_arc(*MOVED.pair(2))
+    lifted, pre = arc.approach_poses(pre_arc=0.006, lift=0.01)
+    np.testing.assert_allclose(pre, arc.needle_pose(arc.pre_insertion_angle(0.006)), atol=1e-15)
+    np.testing.assert_allclose(lifted[:3, 3] - pre[:3, 3], 0.01 * arc.entry.normal, atol=1e-15)
+    tip = (pre @ np.r_[NeedleModel().tip, 1.0])[:3]
+    assert in_port(arc.entry, tip)[2] > 0  # still outside the tissue
+    assert np.linalg.norm(tip - arc.entry.position) == pytest.approx(
+        2 * 0.01018 * np.sin(0.006 / 0.01018 / 2)
+    )
+    with pytest.raises(ValueError):
+        arc.pre_insertion_angle(-1.0)

@@ -148,6 +148,24 @@ class NeedleArc:
         phis = [phi_start + prof.s(t) * (phi_end - phi_start) for t in times]
         return TimedPoses(times, np.stack([self.needle_pose(p) for p in phis]))
 
+    def approach_poses(self, pre_arc: float = 0.006, lift: float = 0.010) -> list[np.ndarray]:
+        """Needle poses to approach the insertion start: lifted along the entry normal, then
+        with the tip ``pre_arc`` (arc length) before the entry on the needle's circle.
+
+        Starting the sweep a few millimetres before the entry lets the arm's joints get
+        moving (break away from stiction) before the tip reaches the tissue.
+        """
+        T_pre = self.needle_pose(self.pre_insertion_angle(pre_arc))
+        T_lift = T_pre.copy()
+        T_lift[:3, 3] += lift * self.entry.normal
+        return [T_lift, T_pre]
+
+    def pre_insertion_angle(self, pre_arc: float = 0.006) -> float:
+        """Sweep angle (negative) with the tip ``pre_arc`` of arc length before the entry."""
+        if pre_arc < 0 or not np.isfinite(pre_arc):
+            raise ValueError(f"pre_arc must be a non-negative length, got {pre_arc}")
+        return -pre_arc / self.needle.radius
+
     def insertion(self, start_angle: float = 0.0, **timing) -> TimedPoses:
         """Timed needle poses from φ = ``start_angle`` (0: tip at entry) to the insertion end."""
         return self.sweep(start_angle, self.insert_end_angle, **timing)

@@ -6,6 +6,9 @@ one joint setpoint through ``sink.servo_jp`` and returns a :class:`MoveStatus`. 
 so a behaviour-tree tick can drive it. An infeasible move does not raise: ``start`` returns a
 failed status whose reason names the waypoint and the joint. Poses are tip poses in the arm's
 base (RCM) frame, as ``measured_cp`` reports them; :func:`to_base` converts world poses.
+With a :class:`~suture_bt.control.PIServo` as sink, hand the started move to
+``servo.follow(move)``: the servo then steps it at its own rate and the caller polls
+``move.status``.
 """
 
 from __future__ import annotations
