@@ -82,6 +82,7 @@ def test_true_tip_reaches_every_port_with_the_true_offset_estimate(condition):
             for name, port in ports.items():
                 tip = truth.tip_pose_world(name)
                 errors.append(np.linalg.norm(tip[:3, 3] - port.position))
+        print(condition, np.round(np.array(errors) * 1e3, 3))
         assert max(errors) < 0.3e-3, np.round(np.array(errors) * 1e3, 3)
 
 
