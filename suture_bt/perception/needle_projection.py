@@ -10,6 +10,8 @@ Poses are ``T_cam_needle`` in the left camera's OpenCV frame.
 
 from __future__ import annotations
 
+import functools
+
 import cv2
 import numpy as np
 
@@ -18,7 +20,14 @@ from suture_bt.interfaces import CameraModel
 
 
 def _unit(v: np.ndarray) -> np.ndarray:
-    return v / np.linalg.norm(v, axis=-1, keepdims=True)
+    return v / np.sqrt(np.sum(v * v, -1, keepdims=True))
+
+
+def _cross(a: np.ndarray, b: np.ndarray) -> np.ndarray:
+    """Cross product over the last axis (np.cross has a large per-call overhead)."""
+    a0, a1, a2 = a[..., 0], a[..., 1], a[..., 2]
+    b0, b1, b2 = b[..., 0], b[..., 1], b[..., 2]
+    return np.stack([a1 * b2 - a2 * b1, a2 * b0 - a0 * b2, a0 * b1 - a1 * b0], -1)
 
 
 def pixel_rays(cam: CameraModel, uv: np.ndarray) -> np.ndarray:
@@ -39,6 +48,7 @@ def project_cam(cam: CameraModel, points_cam: np.ndarray) -> np.ndarray:
     )
 
 
+@functools.lru_cache(maxsize=8)
 def _needle_frame_basis(model: NeedleModel) -> tuple[np.ndarray, float, float]:
     """Fixed basis [chord, bulge, normal] of the needle frame, chord length, centre-to-chord."""
     b, t = model.base, model.tip
@@ -67,10 +77,10 @@ def params_to_pose(params: np.ndarray, cam: CameraModel, model: NeedleModel) -> 
     T = t[..., None] * rt
     e1 = _unit(T - B)
     mid = 0.5 * (B + T)
-    n0 = _unit(np.cross(e1, _unit(mid)))
-    n1 = np.cross(e1, n0)
+    n0 = _unit(_cross(e1, _unit(mid)))
+    n1 = _cross(e1, n0)
     u = np.cos(psi)[..., None] * n0 + np.sin(psi)[..., None] * n1
-    Rc = np.stack([e1, u, np.cross(e1, u)], -1)
+    Rc = np.stack([e1, u, _cross(e1, u)], -1)
     R = Rc @ Bn.T
     out = np.zeros(x.shape[:-1] + (4, 4))
     out[..., :3, :3] = R
@@ -90,8 +100,8 @@ def pose_to_params(T_cam_needle: np.ndarray, cam: CameraModel, model: NeedleMode
     e1 = _unit(Tp - B)
     mid = 0.5 * (B + Tp)
     u = np.einsum("...ij,j->...i", R, Bn[:, 1])
-    n0 = _unit(np.cross(e1, _unit(mid)))
-    n1 = np.cross(e1, n0)
+    n0 = _unit(_cross(e1, _unit(mid)))
+    n1 = _cross(e1, n0)
     psi = np.arctan2(np.sum(u * n1, -1), np.sum(u * n0, -1))
     phi = np.arccos(np.clip(np.sum(_unit(-B) * e1, -1), -1.0, 1.0))
     uvb, uvt = project_cam(cam, B), project_cam(cam, Tp)

@@ -108,9 +108,13 @@ def _to_needle(T: np.ndarray, rays: EdgeRays) -> tuple[np.ndarray, np.ndarray]:
     return o, d
 
 
-def _arc_f(theta, o, d, r):
-    """Squared distance f from the arc point at theta to each ray's line, and its along-ray t."""
-    a, b = r * np.cos(theta) - o[..., 0], r * np.sin(theta) - o[..., 1]
+def _arc_f(theta, o, d, r, cs=None):
+    """Squared distance f from the arc point at theta to each ray's line, and its along-ray t.
+
+    ``cs`` = (cos θ, sin θ) when already known.
+    """
+    c, s = (np.cos(theta), np.sin(theta)) if cs is None else cs
+    a, b = r * c - o[..., 0], r * s - o[..., 1]
     qd = a * d[..., 0] + b * d[..., 1] - o[..., 2] * d[..., 2]
     return a * a + b * b + o[..., 2] ** 2 - qd * qd, qd
 
@@ -162,6 +166,8 @@ def residuals(
     model: NeedleModel,
     theta: np.ndarray | None = None,
     theta_start: np.ndarray | None = None,
+    grid: int = N_THETA_GRID,
+    cs: tuple[np.ndarray, np.ndarray] | None = None,
 ):
     """Edge residuals (K, N) in pixels for poses T (K, 4, 4); also the arc angles used.
 
@@ -170,8 +176,8 @@ def residuals(
     """
     o, d = _to_needle(T, rays)
     if theta is None:
-        theta = nearest_arc_angle(o, d, model, start=theta_start)
-    f, qd = _arc_f(theta, o, d, model.radius)
+        theta = nearest_arc_angle(o, d, model, grid=grid, start=theta_start)
+    f, qd = _arc_f(theta, o, d, model.radius, cs)
     dist = np.sqrt(np.maximum(f, 0.0))
     depth = qd * rays.dz[None]
     r = (dist - model.wire_radius) * rays.focal[None] / np.where(depth > 1e-6, depth, np.nan)
@@ -207,11 +213,13 @@ def levenberg_marquardt(
         w = np.where(np.isfinite(w), w, 0.0)
         rr = np.where(np.isfinite(r), r, 0.0)
         xs = x[:, None, :] + np.diag(FD_STEPS)[None]
+        th6 = np.repeat(theta, 6, 0)
         rp, _ = residuals(
             params_to_pose(xs.reshape(-1, 6), cam, model).reshape(-1, 4, 4),
             rays,
             model,
-            np.repeat(theta, 6, 0),
+            th6,
+            cs=(np.cos(th6), np.sin(th6)),
         )
         J = (rp.reshape(len(x), 6, -1) - rr[:, None]) / FD_STEPS[None, :, None]  # (K, 6, N)
         J = np.where(np.isfinite(J), J, 0.0)
@@ -277,6 +285,9 @@ class PoseFitter:
     n_keep: int = 6
     min_edge_points: int = 12
     seed: int = 0
+    #: LM iterations: all kept starts (σ = 3 px, then 1 px) on a subsample, then the best two
+    #: on every edge point.
+    iterations: tuple[int, int, int] = (10, 10, 8)
 
     def fit(
         self,
@@ -314,7 +325,7 @@ class PoseFitter:
             starts = np.concatenate(
                 [starts, pose_to_params(np.asarray(warm_start)[None], cam, self.model)]
             )
-        r0, _ = residuals(params_to_pose(starts, cam, self.model), coarse, self.model)
+        r0, _ = residuals(params_to_pose(starts, cam, self.model), coarse, self.model, grid=12)
         c0 = cauchy_cost(r0, 3.0)
         order = np.argsort(c0)[: self.n_keep * 3]
         keep = [i for i in order if np.isfinite(c0[i])][: self.n_keep]
@@ -322,8 +333,9 @@ class PoseFitter:
             keep.append(len(starts) - 1)
         if not keep:
             raise NeedleNotFound("no feasible pose hypothesis from the needle's end points")
-        x, _ = levenberg_marquardt(starts[keep], mid, self.stereo, self.model, 10, 3.0)
-        x, c = levenberg_marquardt(x, mid, self.stereo, self.model, 10, 1.0)
+        it1, it2, it3 = self.iterations
+        x, _ = levenberg_marquardt(starts[keep], mid, self.stereo, self.model, it1, 3.0)
+        x, c = levenberg_marquardt(x, mid, self.stereo, self.model, it2, 1.0)
         order = np.argsort(c)
         T_mid = params_to_pose(x[order], cam, self.model)
         finals = [order[0]]
@@ -333,7 +345,7 @@ class PoseFitter:
             ):
                 finals.append(k)
                 break
-        xf, cf = levenberg_marquardt(x[finals], rays, self.stereo, self.model, 8, 1.0)
+        xf, cf = levenberg_marquardt(x[finals], rays, self.stereo, self.model, it3, 1.0)
         if not np.isfinite(cf).any():
             raise NeedleNotFound("pose fit diverged")
         b = int(np.argmin(cf))

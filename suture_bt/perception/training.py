@@ -28,16 +28,16 @@ HEATMAP_SIGMA = 1.5  # output pixels
 class TrainConfig:
     """Hyper-parameters; ``minutes`` caps wall time, ``steps`` the number of updates."""
 
-    steps: int = 3000
+    steps: int = 2500
     minutes: float = 30.0
     batch: int = 16
-    crop: tuple[int, int] = (256, 192)
+    crop: tuple[int, int] = (192, 128)
     lr: float = 3e-3
     seed: int = 0
     width: int = 16
     val_fraction: float = 0.05
     val_every: int = 250
-    threads: int = 2
+    threads: int = 1
 
 
 def load_dataset(folder: Path) -> dict[str, np.ndarray]:

@@ -1,0 +1,195 @@
+"""Needle-pose benchmark: held-out simulated scenes through the full localisation pipeline.
+
+Scenes use a seed never used for training (training data: seed 1). The needle is free in view
+or held in a jaw, 80-200 mm from the cameras where the scene allows it. Two conditions:
+``unoccluded`` (≥ 97 % of the needle's pixels visible) and ``occluded`` (an arm covers
+10-60 % of it in the left image). Errors: position = distance between estimated and true arc
+centres; angle = geodesic angle; task1 = SRC base + mid + tip distances. Failures to find the
+needle count as failures (success needs < 2 mm and < 5°); error means are over the scenes with
+an estimate, and ``not_found`` says how many had none.
+
+    python benchmarks/needle_pose.py [--json PATH] [--n 200] [--resolution 1920x1080]
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import sys
+import time
+
+import numpy as np
+import torch
+from scipy.spatial.transform import Rotation
+from tqdm import tqdm
+
+from suture_bt.datagen.needle_data import SimScene
+from suture_bt.geometry.needle import SCORED_POINTS
+from suture_bt.kinematics import forward_kinematics
+from suture_bt.perception.needle_localizer import NeedleLocalizer
+from suture_bt.perception.needle_projection import rasterize_needle
+from suture_bt.perception.pose_fit import NeedleNotFound
+from suture_bt.transforms import invert
+
+HELD_OUT_SEED = 1000
+
+
+def _visible_fraction(sim: SimScene, s, mask: np.ndarray) -> float:
+    T = invert(sim.stereo.left.T_world_cam) @ s.T_world_needle
+    full = rasterize_needle(sim.stereo.left, T, sim.model)
+    return float((mask & full).sum() / max(full.sum(), 1))
+
+
+def _occluding_arm(sim: SimScene, s, rng, tries: int = 300):
+    """Joints for an arm whose tip lies between the camera and the needle (image-near)."""
+    cam = sim.stereo.left
+    T_cn = invert(cam.T_world_cam) @ s.T_world_needle
+    target = cam.project(s.T_world_needle[:3, 3][None])[0]
+    best = None
+    for _ in range(tries):
+        arm = ("psm1", "psm2")[int(rng.integers(2))]
+        if s.scenario == f"held_{arm}":
+            continue
+        q = rng.uniform([-1.2, -0.9, 0.08, -2.5, -1.3, -1.3], [1.2, 0.9, 0.22, 2.5, 1.3, 1.3])
+        tip = (sim.sampler.bases[arm] @ forward_kinematics(q))[:3, 3]
+        pc = cam.to_camera(tip[None])[0]
+        if not (0.03 < pc[2] < T_cn[2, 3] - 0.005):
+            continue
+        d = np.linalg.norm(cam.project(tip[None])[0] - target)
+        if best is None or d < best[0]:
+            best = (d, arm, q)
+    return best
+
+
+def _errors(T_est: np.ndarray, T_true: np.ndarray) -> tuple[float, float, float]:
+    pos = float(np.linalg.norm(T_est[:3, 3] - T_true[:3, 3]) * 1e3)
+    ang = float(np.degrees(Rotation.from_matrix(T_est[:3, :3].T @ T_true[:3, :3]).magnitude()))
+    task1 = 0.0
+    for p in SCORED_POINTS.values():
+        a = T_est[:3, :3] @ p + T_est[:3, 3]
+        b = T_true[:3, :3] @ p + T_true[:3, 3]
+        task1 += float(np.linalg.norm(a - b) * 1e3)
+    return pos, ang, task1
+
+
+def _summary(rows: list[dict]) -> dict:
+    est = [r for r in rows if r["found"]]
+    out = {"scenes": len(rows), "not_found": len(rows) - len(est)}
+    if not est:
+        return out | {"success_rate": 0.0}
+    pos = np.array([r["pos_mm"] for r in est])
+    ang = np.array([r["ang_deg"] for r in est])
+    sym = np.array([r["ang_sym_deg"] for r in est])
+    t1 = np.array([r["task1_mm"] for r in est])
+    ok = [r["found"] and r["pos_mm"] < 2.0 and r["ang_deg"] < 5.0 for r in rows]
+    ok_sym = [r["found"] and r["pos_mm"] < 2.0 and r["ang_sym_deg"] < 5.0 for r in rows]
+    t = {k: np.array([r["ms"][k] for r in est]) for k in ("network", "refine", "fit", "total")}
+    return out | {
+        "mean_pos_err_mm": float(pos.mean()),
+        "median_pos_err_mm": float(np.median(pos)),
+        "p95_pos_err_mm": float(np.percentile(pos, 95)),
+        "mean_ang_err_deg": float(ang.mean()),
+        "p95_ang_err_deg": float(np.percentile(ang, 95)),
+        "task1_score_mm": float(t1.mean()),
+        "success_rate": float(np.mean(ok)),
+        "base_tip_swapped": int(np.sum((ang > 90) & (sym < 10))),
+        "mean_ang_err_mod_swap_deg": float(sym.mean()),
+        "success_rate_mod_swap": float(np.mean(ok_sym)),
+        "depth_mm_range": [
+            float(min(r["depth_mm"] for r in est)),
+            float(max(r["depth_mm"] for r in est)),
+        ],
+        "ms_per_stereo_frame": {k: float(v.mean()) for k, v in t.items()}
+        | {"total_p95": float(np.percentile(t["total"], 95))},
+    }
+
+
+def run(n: int, width: int, height: int, seed: int, weights: str | None, threads: int) -> dict:
+    torch.set_num_threads(threads)
+    sim = SimScene(width, height)
+    loc = NeedleLocalizer(sim.stereo, weights=weights)
+    # The needle's 180° symmetry about its bisector (base ↔ tip) as a rotation in its frame.
+    mid = (sim.model.base_angle + sim.model.tip_angle) / 2
+    R_swap = Rotation.from_rotvec(np.pi * np.array([np.cos(mid), np.sin(mid), 0.0])).as_matrix()
+    results = {}
+    try:
+        for ci, cond in enumerate(("unoccluded", "occluded")):
+            rows = []
+            bar = tqdm(range(n), desc=f"{cond} {width}x{height}")
+            for i in bar:
+                rng = np.random.default_rng([seed, ci, i])
+                for _attempt in range(20):
+                    scen = str(rng.choice(["free", "held_psm1", "held_psm2"], p=[0.5, 0.25, 0.25]))
+                    s = sim.sampler.sample(rng, scenario=scen, zr=(0.08, 0.2))
+                    if cond == "unoccluded":
+                        for a in ("psm1", "psm2"):
+                            if s.scenario != f"held_{a}":
+                                s.q[a] = sim.sampler._arm_q(a, rng, False)
+                    else:
+                        occ = _occluding_arm(sim, s, rng)
+                        if occ is None:
+                            continue
+                        s.q[occ[1]] = occ[2]
+                    sim.apply(s)
+                    left, mask = sim.render("left", s, rng)
+                    frac = _visible_fraction(sim, s, mask)
+                    if (cond == "unoccluded" and frac >= 0.97) or (
+                        cond == "occluded" and 0.4 <= frac <= 0.9
+                    ):
+                        break
+                right, _ = sim.render("right", s, rng)
+                T_true = invert(sim.stereo.left.T_world_cam) @ s.T_world_needle
+                row = {"scenario": s.scenario, "visible": frac, "depth_mm": T_true[2, 3] * 1e3}
+                try:
+                    est = loc.localize(left, right)
+                    pos, ang, t1 = _errors(est.T_cam_needle, T_true)
+                    T_sw = T_true.copy()
+                    T_sw[:3, :3] = T_true[:3, :3] @ R_swap
+                    _, ang_sw, _ = _errors(est.T_cam_needle, T_sw)
+                    row |= {
+                        "found": True,
+                        "pos_mm": pos,
+                        "ang_deg": ang,
+                        "ang_sym_deg": min(ang, ang_sw),
+                        "task1_mm": t1,
+                        "rms_px": est.rms_px,
+                        "ms": est.timings_ms,
+                    }
+                except NeedleNotFound as exc:
+                    row |= {"found": False, "reason": exc.reason}
+                rows.append(row)
+                ok = [r for r in rows if r["found"]]
+                if ok:
+                    bar.set_postfix(
+                        med_pos=f"{np.median([r['pos_mm'] for r in ok]):.2f}",
+                        med_ang=f"{np.median([r['ang_deg'] for r in ok]):.1f}",
+                    )
+            results[cond] = _summary(rows) | {"per_scene": rows}
+    finally:
+        sim.close()
+    return results
+
+
+def main(argv=None) -> int:
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--json", help="write the results here")
+    ap.add_argument("--n", type=int, default=200, help="scenes per condition")
+    ap.add_argument("--resolution", default="1920x1080", help="WxH (default 1920x1080)")
+    ap.add_argument("--seed", type=int, default=HELD_OUT_SEED)
+    ap.add_argument("--weights", help="network weights (default: shipped)")
+    ap.add_argument("--threads", type=int, default=1, help="torch threads (default 1)")
+    args = ap.parse_args(argv)
+    w, h = (int(v) for v in args.resolution.lower().split("x"))
+    t0 = time.time()
+    res = run(args.n, w, h, args.seed, args.weights, args.threads)
+    meta = {"resolution": [w, h], "n": args.n, "seed": args.seed, "seconds": time.time() - t0}
+    summary = {k: {kk: vv for kk, vv in v.items() if kk != "per_scene"} for k, v in res.items()}
+    print(json.dumps(summary | {"meta": meta}, indent=2))
+    if args.json:
+        with open(args.json, "w") as f:
+            json.dump(res | {"meta": meta}, f, indent=1, default=float)
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
