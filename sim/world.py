@@ -8,6 +8,9 @@ a held needle, and the phantom's crossing/strain bookkeeping. Same scene + seed 
 
 What skills may see is :attr:`World.task` (the known phantom and needle models), the arms
 (``psm1``, ``psm2``) and the camera. Ground truth lives in ``suture_bt.sim.ground_truth``.
+
+Reach (closed-form IK, tip z into the tissue, tip x along the ridge): PSM2 (at −x) reaches the
+four entry ports, PSM1 (at +x) the four exit ports, so PSM2 inserts and PSM1 pulls through.
 """
 
 from __future__ import annotations
