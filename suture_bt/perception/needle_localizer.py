@@ -34,6 +34,8 @@ from suture_bt.perception.pose_fit import MaskView, NeedleNotFound, PoseFitResul
 MIN_KEYPOINT_SCORE = 0.15
 #: Fewest full-resolution needle pixels per eye to attempt a fit.
 MIN_NEEDLE_PIXELS = 15
+#: Base and tip keypoints closer than this (full-resolution px) are not trusted as two ends.
+MIN_END_SEPARATION_PX = 8.0
 #: Nearest needle distance considered (m), for the widest plausible wire in pixels.
 MIN_DEPTH = 0.05
 
@@ -110,6 +112,27 @@ class NeedleLocalizer:
         kp_full = ((kp + 0.5) * OUTPUT_STRIDE) / s - 0.5
         return prob, kp_full, score, OUTPUT_STRIDE / s
 
+    def _ends_and_depth(self, kp: np.ndarray, score: np.ndarray):
+        """Left (base, tip) pixels when trusted, and a depth hint from their disparity.
+
+        The needle's two ends look alike, so the heads may both fire on one end (then the fit
+        finds the ends from the mask) or swap between the eyes (pairs are matched by row).
+        """
+        ends = depth = None
+        if score[0].min() < MIN_KEYPOINT_SCORE:
+            return None, None
+        if np.linalg.norm(kp[0, 0] - kp[0, 1]) < MIN_END_SEPARATION_PX:
+            return None, None
+        ends = (kp[0, 0], kp[0, 1])
+        if score[1].min() >= MIN_KEYPOINT_SCORE:
+            right = kp[1]
+            if np.abs(kp[0, :, 1] - right[::-1, 1]).sum() < np.abs(kp[0, :, 1] - right[:, 1]).sum():
+                right = right[::-1]
+            disp = kp[0, :, 0] - right[:, 0]
+            if np.all(disp > 1.0):
+                depth = float(np.mean(self.stereo.left.fx * self.stereo.baseline / disp))
+        return ends, depth
+
     def localize(
         self, left: np.ndarray, right: np.ndarray, previous: np.ndarray | None = None
     ) -> NeedleEstimate:
@@ -120,14 +143,7 @@ class NeedleLocalizer:
         t0 = time.perf_counter()
         prob, kp, score, scale = self.network(left, right)
         t1 = time.perf_counter()
-        ends = None
-        depth = None
-        if score[0].min() >= MIN_KEYPOINT_SCORE:
-            ends = (kp[0, 0], kp[0, 1])
-            if score[1].min() >= MIN_KEYPOINT_SCORE:
-                disp = kp[0, :, 0] - kp[1, :, 0]
-                if np.all(disp > 1.0):
-                    depth = float(np.mean(self.stereo.left.fx * self.stereo.baseline / disp))
+        ends, depth = self._ends_and_depth(kp, score)
         # Widest plausible wire (half width, px): from the disparity depth, else the nearest
         # working distance; anything thicker touching the needle (jaws, shaft) is dropped.
         z_min = 0.85 * depth if depth is not None else MIN_DEPTH
