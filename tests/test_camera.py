@@ -65,6 +65,12 @@ def test_model_matches_design():
     assert 0 < uv[0] < 1920 and 0 < uv[1] < 1080
     with pytest.raises(ValueError, match="resolution"):
         stereo_model(0, 480)
+    # A moved endoscope keeps the eyes' offsets in its frame.
+    T_moved = make_transform(rpy_to_matrix((0.1, 0.2, 0.3)), (0.01, 0.02, 0.2))
+    moved = stereo_model(640, 480, T_moved).left
+    np.testing.assert_allclose(
+        np.linalg.inv(T_moved) @ moved.T_world_cam, np.linalg.inv(Tcf) @ L.T_world_cam, atol=1e-12
+    )
 
 
 @pytest.mark.parametrize(
