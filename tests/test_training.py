@@ -47,3 +47,13 @@ def test_train_few_steps_writes_loadable_weights(tmp_path):
 def test_missing_dataset_is_a_clear_error(tmp_path):
     with pytest.raises(FileNotFoundError, match="suture-bt data needle"):
         load_dataset(tmp_path)
+
+
+def test_train_command_writes_weights(tmp_path, capsys):
+    from suture_bt.cli import main
+
+    _write_dataset(tmp_path)
+    out = tmp_path / "cli.pt"
+    args = ["train", "needle", "--data", str(tmp_path), "--out", str(out), "--steps", "2"]
+    assert main(args) == 0
+    assert out.is_file() and '"steps": 2' in capsys.readouterr().out
