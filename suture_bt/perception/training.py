@@ -207,7 +207,7 @@ def train(data_dir: Path, out_path: Path, cfg: TrainConfig, progress: bool = Tru
         lr = cfg.lr * min(1.0, prog / 0.03) * 0.5 * (1 + np.cos(np.pi * min(prog, 1.0)))
         for g in opt.param_groups:
             g["lr"] = max(lr, 1e-3 * cfg.lr)
-        bar.set_postfix(loss=f"{float(loss):.3f}", **{k: f"{v:.3f}" for k, v in parts.items()})
+        bar.set_postfix(loss=f"{loss.item():.3f}", **{k: f"{v:.3f}" for k, v in parts.items()})
         last = step == cfg.steps - 1 or prog >= 1.0
         if (step + 1) % cfg.val_every == 0 or last:
             metrics = evaluate(net, data, val)
