@@ -23,6 +23,7 @@ from suture_bt.kinematics import (
 from suture_bt.sim.joint_offsets import JointOffset
 from suture_bt.sim.joint_servo import JointServo
 from suture_bt.sim.psm_body import PSMBody
+from suture_bt.validation import as_joint_vector, as_pose
 
 #: Peak joint speeds of ``move_jp`` (rad/s; m/s for insertion) and of the jaw (rad/s).
 MAX_JOINT_SPEED = np.array([0.6, 0.6, 0.05, 2.0, 2.0, 2.0])
@@ -66,20 +67,6 @@ def _check_joint_limits(q: np.ndarray, arm: str) -> None:
     bad = limit_violations(q)
     if bad:
         raise JointLimitError(f"{arm}: command outside the joint limits: {'; '.join(bad)}")
-
-
-def _as_joint_vector(jp, arm: str) -> np.ndarray:
-    q = np.asarray(jp, dtype=float).reshape(-1)
-    if q.shape != (6,) or not np.all(np.isfinite(q)):
-        raise ValueError(f"{arm}: expected 6 finite joint values, got {jp!r}")
-    return q
-
-
-def _as_pose(cp, arm: str) -> np.ndarray:
-    T = np.asarray(cp, dtype=float)
-    if T.shape != (4, 4) or not np.all(np.isfinite(T)):
-        raise ValueError(f"{arm}: expected a finite 4×4 pose, got shape {T.shape}")
-    return T
 
 
 class SimulatedJaw:
@@ -171,14 +158,14 @@ class SimulatedPSM:
 
     def servo_jp(self, jp) -> None:
         """Set the low-level set-point now (cancels any move)."""
-        q = _as_joint_vector(jp, self.name)
+        q = as_joint_vector(jp, self.name)
         _check_joint_limits(q, self.name)
         self._trajectory = None
         self._set_low_level(q)
 
     def move_jp(self, jp) -> None:
         """Start a minimum-jerk move from the current set-point to jp."""
-        q = _as_joint_vector(jp, self.name)
+        q = as_joint_vector(jp, self.name)
         _check_joint_limits(q, self.name)
         self._trajectory = MinJerkTrajectory.with_speed_limit(
             self._setpoint, q, self._clock.now(), MAX_JOINT_SPEED
@@ -193,7 +180,7 @@ class SimulatedPSM:
 
     def ik(self, cp) -> np.ndarray:
         """Joint vector for tip pose cp (base frame), wrist branch nearest the set-point."""
-        return inverse_kinematics(_as_pose(cp, self.name), self._setpoint)
+        return inverse_kinematics(as_pose(cp, self.name), self._setpoint)
 
     def servo_cp(self, cp) -> None:
         """Set-point at the IK of cp; raises ``UnreachablePoseError`` when unreachable."""

@@ -27,16 +27,6 @@ from suture_bt.transforms import make_transform
 ARM_FOR_KIND = {"entry": "psm2", "exit": "psm1"}
 
 
-def port_goal(port) -> np.ndarray:
-    """Tip pose at a port: z into the tissue, x along the phantom's ridge (reachable)."""
-    z = -port.normal
-    x = port.T[:3, 1] - np.dot(port.T[:3, 1], z) * z
-    x /= np.linalg.norm(x)
-    T = np.eye(4)
-    T[:3, 0], T[:3, 1], T[:3, 2], T[:3, 3] = x, np.cross(z, x), z, port.position
-    return T
-
-
 def drive(world, moves, settle: float, limit: float = 20.0) -> dict[str, MoveStatus]:
     """Hand started moves to their PI servos, step the world in 50 ms ticks until all end,
     then hold for ``settle`` s (the servos advance the moves at their own rate)."""
@@ -73,7 +63,7 @@ def test_true_tip_reaches_every_port_with_the_true_offset_estimate(condition):
             ports = dict(zip(("psm2", "psm1"), phantom.pair(pair), strict=True))
             moves = {}
             for name, port in ports.items():
-                goal = to_base(port_goal(port), world.arms[name].base_frame())
+                goal = to_base(port.tip_pose_into_tissue(), world.arms[name].base_frame())
                 moves[name] = CartesianMove(servos[name], goal, v_lin=0.05, a_lin=0.4)
                 st = moves[name].start()
                 assert not st.failed, st.reason

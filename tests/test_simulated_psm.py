@@ -15,16 +15,6 @@ from suture_bt.transforms import invert
 ARM_FOR_KIND = {"entry": "psm2", "exit": "psm1"}
 
 
-def port_goal(port) -> np.ndarray:
-    """Tip pose at a port: z into the tissue, x along the phantom's ridge (reachable)."""
-    z = -port.normal
-    x = port.T[:3, 1] - np.dot(port.T[:3, 1], z) * z
-    x /= np.linalg.norm(x)
-    T = np.eye(4)
-    T[:3, 0], T[:3, 1], T[:3, 2], T[:3, 3] = x, np.cross(z, x), z, port.position
-    return T
-
-
 @pytest.fixture(scope="module")
 def ideal_world():
     with World.from_scene(scene_from_dict({"servo": {"error_model": False}})) as w:
@@ -41,7 +31,7 @@ def test_servo_cp_to_every_port_lands_the_true_tip(ideal_world):
     gt = ground_truth.GroundTruth(w)
     for port in w.task.phantom.ports():
         arm = w.arms[ARM_FOR_KIND[port.kind]]
-        arm.servo_cp(invert(arm.base_frame()) @ port_goal(port))
+        arm.servo_cp(invert(arm.base_frame()) @ port.tip_pose_into_tissue())
         w.step(0.005)
         tip = gt.tip_pose_world(arm.name)
         assert np.linalg.norm(tip[:3, 3] - port.position) < 0.5e-3, port.name
@@ -54,7 +44,7 @@ def test_offset_b_is_hidden_in_measurements():
     )
     with World.from_scene(scene) as w:
         port = w.task.phantom.port("entry2")
-        goal = invert(w.psm2.base_frame()) @ port_goal(port)
+        goal = invert(w.psm2.base_frame()) @ port.tip_pose_into_tissue()
         w.psm2.servo_cp(goal)
         w.step(0.01)
         # The arm reports exactly the commanded pose ...
@@ -98,7 +88,7 @@ def test_move_jp_is_non_blocking_and_min_jerk(ideal_world):
 
 def test_move_cp_goes_to_the_ik_solution(ideal_world):
     w = ideal_world
-    goal = invert(w.psm2.base_frame()) @ port_goal(w.task.phantom.port("entry3"))
+    goal = invert(w.psm2.base_frame()) @ w.task.phantom.port("entry3").tip_pose_into_tissue()
     w.psm2.move_cp(goal)
     while w.psm2.is_busy():
         w.step(0.1)

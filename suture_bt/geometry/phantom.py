@@ -45,6 +45,13 @@ class Port:
     def normal(self) -> np.ndarray:
         return self.T[:3, 2]
 
+    def tip_pose_into_tissue(self) -> np.ndarray:
+        """A tool-tip pose at the port: z into the tissue, x along the port's y (the ridge)."""
+        z = -self.normal
+        x = self.T[:3, 1] - np.dot(self.T[:3, 1], z) * z
+        x /= np.linalg.norm(x)
+        return make_transform(np.column_stack([x, np.cross(z, x), z]), self.position)
+
 
 def default_ports_in_phantom() -> list[Port]:
     """The 8 SRC ports in the phantom frame, ordered entry1, exit1, ..., entry4, exit4."""

@@ -29,6 +29,7 @@ from suture_bt.kinematics import (
 )
 from suture_bt.planning.timing import Profile, make_profile
 from suture_bt.transforms import invert
+from suture_bt.validation import as_joint_vector, as_pose
 
 #: Default joint limits for moves: revolute rad/s, rad/s²; prismatic m/s, m/s².
 JOINT_VEL = np.array([0.6, 0.6, 0.05, 1.5, 1.5, 1.5])
@@ -62,22 +63,6 @@ def to_base(T_world: np.ndarray, T_world_base: np.ndarray) -> np.ndarray:
     return invert(T_world_base) @ np.asarray(T_world, dtype=float)
 
 
-def _as_joint_vector(q, what: str) -> np.ndarray:
-    v = np.asarray(q, dtype=float).reshape(-1)
-    if v.shape != (NUM_JOINTS,) or not np.all(np.isfinite(v)):
-        raise ValueError(f"{what} must be {NUM_JOINTS} finite joint values, got {q}")
-    return v
-
-
-def _as_pose(T, what: str) -> np.ndarray:
-    M = np.asarray(T, dtype=float)
-    if M.shape != (4, 4) or not np.all(np.isfinite(M)):
-        raise ValueError(f"{what} must be a finite 4×4 transform")
-    if not np.allclose(M[:3, :3] @ M[:3, :3].T, np.eye(3), atol=1e-6):
-        raise ValueError(f"{what} has a rotation part that is not orthonormal")
-    return M
-
-
 def _jump_reason(q_prev: np.ndarray, q: np.ndarray) -> str:
     jump = np.abs(q - q_prev) > MAX_JOINT_JUMP
     if not np.any(jump):
@@ -105,7 +90,7 @@ class _Move:
             if not hasattr(self.sink, "setpoint_jp"):
                 raise ValueError("q_start is required when the sink has no setpoint_jp()")
             q_start = self.sink.setpoint_jp()
-        return _as_joint_vector(q_start, "q_start")
+        return as_joint_vector(q_start, "q_start")
 
     def _fail(self, reason: str) -> MoveStatus:
         self.status = MoveStatus(self.status.progress, failed=True, reason=reason)
@@ -152,7 +137,7 @@ class JointMove(_Move):
         wps = np.asarray(waypoints, dtype=float)
         if wps.ndim == 1:
             wps = wps[None]
-        self.waypoints = [_as_joint_vector(w, f"waypoint {i}") for i, w in enumerate(wps)]
+        self.waypoints = [as_joint_vector(w, f"waypoint {i}") for i, w in enumerate(wps)]
         if not self.waypoints:
             raise ValueError("a joint move needs at least one waypoint")
         self.v_max = np.broadcast_to(np.asarray(v_max, dtype=float), (NUM_JOINTS,))
@@ -261,7 +246,7 @@ class CartesianMove(_Move):
         g = np.asarray(goals, dtype=float)
         if g.ndim == 2:
             g = g[None]
-        self.goals = [_as_pose(T, f"goal {i + 1}") for i, T in enumerate(g)]
+        self.goals = [as_pose(T, f"goal {i + 1}") for i, T in enumerate(g)]
         if not self.goals:
             raise ValueError("a Cartesian move needs at least one goal pose")
         self.limits = (v_lin, a_lin, v_ang, a_ang)
@@ -336,7 +321,7 @@ class PoseSequenceMove(_Move):
             raise ValueError("need at least two poses and one time per pose")
         if np.any(np.diff(self.times) <= 0):
             raise ValueError("pose times must increase strictly")
-        self.poses = [_as_pose(T, f"pose {i + 1}") for i, T in enumerate(P)]
+        self.poses = [as_pose(T, f"pose {i + 1}") for i, T in enumerate(P)]
         self.joint_path: list[np.ndarray] = []
         self._quats = [_quat(T[:3, :3]) for T in self.poses]
         self._q_prev: np.ndarray | None = None
