@@ -123,3 +123,163 @@ def train_regressor(
         {"n_per_arm": n_per_arm, "seed": seed, "epochs": epochs, "noise_px_max": noise_px_max}
     )
     return reg
+
+
+# --------------------------------------------------------------------------- keypoint CNN
+
+
+def augment_images(images: np.ndarray, rng: np.random.Generator) -> np.ndarray:
+    """Brightness ×[0.5, 2] (clipped, as the camera does) and Gaussian noise σ ∈ [0, 4] levels."""
+    x = images.astype(np.float32)
+    b = rng.uniform(0.5, 2.0, (x.shape[0], 1, 1, 1)).astype(np.float32)
+    s = rng.uniform(0.0, 4.0, (x.shape[0], 1, 1, 1)).astype(np.float32)
+    x = x * b + rng.standard_normal(x.shape, dtype=np.float32) * s
+    return np.clip(np.rint(x), 0, 255).astype(np.uint8)
+
+
+def _shift(images: np.ndarray, du: int, dv: int) -> np.ndarray:
+    """Images translated by integer (du, dv) pixels, zero-filled."""
+    out = np.zeros_like(images)
+    h, w = images.shape[1:3]
+    src = images[:, max(-dv, 0) : h - max(dv, 0), max(-du, 0) : w - max(du, 0)]
+    out[:, max(dv, 0) : max(dv, 0) + src.shape[1], max(du, 0) : max(du, 0) + src.shape[2]] = src
+    return out
+
+
+def heatmap_ce(logits: torch.Tensor, uv: torch.Tensor, sigma: float) -> torch.Tensor:
+    """Cross-entropy between the spatial softmax of logits (B×K×H×W) and a Gaussian at uv."""
+    b, k, h, w = logits.shape
+    vv, uu = torch.meshgrid(torch.arange(h), torch.arange(w), indexing="ij")
+    d2 = (uu[None, None] - uv[..., 0, None, None]) ** 2 + (
+        vv[None, None] - uv[..., 1, None, None]
+    ) ** 2
+    target = torch.softmax((-d2 / (2 * sigma**2)).reshape(b, k, -1), -1)
+    logp = torch.log_softmax(logits.reshape(b, k, -1), -1)
+    return -(target * logp).sum(-1).mean()
+
+
+def train_keypoint_detector(
+    data: dict,
+    *,
+    epochs: int = 8,
+    batch: int = 16,
+    lr: float = 2e-3,
+    seed: int = 0,
+    minutes: float | None = None,
+    progress: bool = True,
+):
+    """Train both stages on rendered windows (``images`` N×256×256×3, ``keypoints`` N×4×2)."""
+    import time
+
+    from suture_bt.calibration.keypoint_net import (
+        COARSE_POOL,
+        COARSE_WIDTH,
+        FINE_WIDTH,
+        PATCH,
+        FineNet,
+        KeypointDetector,
+        KeypointNet,
+        box_average,
+        cut_patches,
+        to_input,
+        window_to_coarse,
+    )
+
+    torch.manual_seed(seed)
+    rng = np.random.default_rng(seed + 7)
+    images, kps = data["images"], data["keypoints"].astype(np.float64)
+    n = images.shape[0]
+    coarse, fine = KeypointNet(COARSE_WIDTH), FineNet(FINE_WIDTH)
+    params = list(coarse.parameters()) + list(fine.parameters())
+    opt = torch.optim.Adam(params, lr=lr)
+    steps = epochs * ((n + batch - 1) // batch)
+    t0 = time.perf_counter()
+    step = 0
+    bar = tqdm(total=steps, desc="keypoint CNN", disable=not progress)
+    coarse.train()
+    fine.train()
+    done = False
+    for _ in range(epochs):
+        perm = rng.permutation(n)
+        for i in range(0, n, batch):
+            idx = perm[i : i + batch]
+            du, dv = (int(v) for v in rng.integers(-16, 17, 2))
+            imgs = augment_images(_shift(images[idx], du, dv), rng)
+            uv = kps[idx] + (du, dv)
+            c_uv = torch.as_tensor(window_to_coarse(uv))
+            loss_c = heatmap_ce(coarse(to_input(box_average(imgs, COARSE_POOL))), c_uv, 1.0)
+            # Fine stage: a patch around every keypoint, offset as a coarse estimate would be.
+            centres = uv + rng.uniform(-5, 5, uv.shape)
+            origins = np.floor(centres + 0.5 - PATCH / 2 + 0.5).astype(int)
+            patches = np.concatenate([cut_patches(imgs[j], origins[j]) for j in range(len(idx))])
+            f_uv = torch.as_tensor((uv - origins).reshape(-1, 1, 2))
+            logits = fine(to_input(patches))
+            own = logits[
+                torch.arange(logits.shape[0]), torch.as_tensor(np.tile(range(4), len(idx)))
+            ]
+            loss_f = heatmap_ce(own[:, None], f_uv, 1.0)
+            loss = loss_c + loss_f
+            opt.zero_grad()
+            loss.backward()
+            opt.step()
+            bar.update(1)
+            bar.set_postfix(
+                coarse=f"{float(loss_c.detach()):.2f}", fine=f"{float(loss_f.detach()):.2f}"
+            )
+            if step >= steps or (minutes is not None and time.perf_counter() - t0 > 60 * minutes):
+                done = True
+                break
+        if done:
+            break
+    bar.close()
+    meta = {"coarse_width": COARSE_WIDTH, "fine_width": FINE_WIDTH, "n_images": int(n)}
+    meta |= {"seed": seed, "epochs": epochs, "steps": step}
+    meta["seconds"] = round(time.perf_counter() - t0, 1)
+    return KeypointDetector(coarse.eval(), fine.eval(), meta)
+
+
+def train_calibration(
+    data_dir,
+    out_dir=None,
+    *,
+    seed: int = 0,
+    steps: int | None = None,
+    minutes: float | None = None,
+    progress: bool = True,
+) -> dict:
+    """``suture-bt train calibration``: the offset MLP (projected keypoints, 20k per arm) and
+    the keypoint CNN (rendered windows in ``data_dir``); both saved into ``out_dir``
+    (default: the packaged weights folder)."""
+    from pathlib import Path
+
+    from suture_bt.calibration.keypoint_net import WEIGHTS_PATH as KP_PATH
+    from suture_bt.calibration.offset_regressor import WEIGHTS_PATH as REG_PATH
+
+    folder = Path(out_dir) if out_dir else REG_PATH.parent
+    torch.set_num_threads(max(1, min(2, torch.get_num_threads())))
+    reg = train_regressor(20000, seed=seed, epochs=60, progress=progress)
+    reg.save(folder / REG_PATH.name)
+    data = load_windows(data_dir)
+    epochs = 6
+    if steps is not None:
+        epochs = max(1, -(-steps * 16 // data["images"].shape[0]))
+    det = train_keypoint_detector(
+        data, epochs=epochs, seed=seed, minutes=minutes, progress=progress
+    )
+    det.save(folder / KP_PATH.name)
+    return {"regressor": str(folder / REG_PATH.name), "detector": str(folder / KP_PATH.name)} | {
+        "detector_meta": det.meta
+    }
+
+
+def load_windows(folder) -> dict:
+    """All ``calibration_*.npz`` shards of a dataset folder, concatenated."""
+    from pathlib import Path
+
+    files = sorted(Path(folder).glob("calibration_*.npz"))
+    if not files:
+        raise FileNotFoundError(
+            f"no calibration_*.npz shards in {folder}: run `suture-bt data calibration` first"
+        )
+    parts = [dict(np.load(f)) for f in files]
+    return {k: np.concatenate([p[k] for p in parts]) for k in parts[0]}

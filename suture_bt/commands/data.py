@@ -16,9 +16,16 @@ def _needle(n: int, out: Path, seed: int) -> dict:
     return generate(n, out, seed)
 
 
+def _calibration(n: int, out: Path, seed: int) -> dict:
+    from suture_bt.datagen.calibration_data import generate
+
+    return generate(n, out, seed)
+
+
 #: Dataset generators by target name.
 TARGETS = {
     "needle": _needle,
+    "calibration": _calibration,
 }
 
 

@@ -9,7 +9,7 @@ from __future__ import annotations
 import json
 from pathlib import Path
 
-DEFAULT_DATA = {"needle": "data/needle"}
+DEFAULT_DATA = {"needle": "data/needle", "calibration": "data/calibration"}
 
 
 def _needle(args) -> dict:
@@ -25,9 +25,17 @@ def _needle(args) -> dict:
     return train(Path(args.data or DEFAULT_DATA["needle"]), out, cfg) | {"weights": str(out)}
 
 
+def _calibration(args) -> dict:
+    from suture_bt.calibration.training import train_calibration
+
+    data = args.data or DEFAULT_DATA["calibration"]
+    return train_calibration(data, args.out, seed=args.seed, steps=args.steps, minutes=args.minutes)
+
+
 #: Trainers by target name.
 TARGETS = {
     "needle": _needle,
+    "calibration": _calibration,
 }
 
 
