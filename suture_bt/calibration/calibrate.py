@@ -73,15 +73,15 @@ class CalibrationResult:
 _MODELS: dict = {}
 
 
-def _load_models():
-    """The shipped detector and regressor, loaded once."""
-    if not _MODELS:
+def _shipped(kind: str):
+    """The shipped keypoint detector or offset regressor, loaded once."""
+    if kind not in _MODELS:
         from suture_bt.calibration.keypoint_net import KeypointDetector
         from suture_bt.calibration.offset_regressor import OffsetRegressor
 
-        _MODELS["detector"] = KeypointDetector.load()
-        _MODELS["regressor"] = OffsetRegressor.load()
-    return _MODELS["detector"], _MODELS["regressor"]
+        loader = KeypointDetector if kind == "detector" else OffsetRegressor
+        _MODELS[kind] = loader.load()
+    return _MODELS[kind]
 
 
 def estimate_offset(
@@ -97,10 +97,9 @@ def estimate_offset(
 ) -> CalibrationResult:
     """Δq̂ from one left-eye image taken at the calibration pose; raises CalibrationFailed."""
     t0 = time.perf_counter()
-    if detector is None or (regressor is None and method == "mlp"):
-        d, r = _load_models()
-        detector = detector or d
-        regressor = regressor or r
+    detector = detector or _shipped("detector")
+    if method == "mlp":
+        regressor = regressor or _shipped("regressor")
     q_meas = np.asarray(q_meas, dtype=float)
     T_base = PSM_BASES[arm]
     expected = project_keypoints(q_meas, CALIBRATION_JAW, T_base, cam)[0]

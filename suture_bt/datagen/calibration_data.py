@@ -33,7 +33,7 @@ from suture_bt.calibration.calibration_pose import (
 from suture_bt.calibration.jaw_keypoints import JAW_HALF_THICKNESS, JAW_TIP_LENGTH
 from suture_bt.calibration.keypoint_net import INPUT_SIZE, Window, window_around
 from suture_bt.calibration.scene_geometry import ARM_NAMES
-from suture_bt.calibration.training import MEASURED_JITTER
+from suture_bt.calibration.training import WINDOW_JITTER
 from suture_bt.interfaces import CameraModel
 
 SHARD = 250
@@ -84,7 +84,7 @@ class CalibrationScenes:
         """Pose the arms; returns (q_meas, offset, window, keypoints in image px)."""
         if offset is None:
             offset = rng.uniform(-1, 1, 3) * OFFSET_BOUND * OFFSET_MARGIN
-        q_meas = CALIBRATION_POSES[arm] + rng.uniform(-1, 1, 6) * MEASURED_JITTER
+        q_meas = CALIBRATION_POSES[arm] + rng.uniform(-1, 1, 6) * WINDOW_JITTER
         q_true = q_meas.copy()
         q_true[:3] += offset
         jaw = CALIBRATION_JAW + rng.uniform(-0.03, 0.03)
