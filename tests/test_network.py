@@ -10,6 +10,7 @@ from suture_bt.perception.network import (
     NeedleNet,
     WeightsError,
     count_parameters,
+    decode_ends,
     decode_keypoints,
     load_network,
     save_weights,
@@ -60,7 +61,7 @@ def test_mismatched_weights_error(tmp_path):
     torch.save({"format": "something else"}, path)
     with pytest.raises(WeightsError, match="bad.pt"):
         load_network(path)
-    blob = {"format": "suture_bt.needle_net.v1", "width": 16, "state_dict": {"x": torch.zeros(1)}}
+    blob = {"format": "suture_bt.needle_net.v2", "width": 16, "state_dict": {"x": torch.zeros(1)}}
     torch.save(blob, path)
     with pytest.raises(WeightsError, match="do not match"):
         load_network(path)
@@ -80,3 +81,19 @@ def test_shipped_weights_load_and_run_on_a_rendered_frame():
     with torch.inference_mode():
         out = net(x)
     assert out.shape == (1, 3, 176, 320) and torch.isfinite(out).all()
+
+
+def test_decode_ends_finds_both_peaks_and_orders_base_first():
+    h, w = 40, 60
+    yy, xx = np.mgrid[0:h, 0:w]
+
+    def gauss(u, v):
+        return np.exp(-((xx - u) ** 2 + (yy - v) ** 2) / (2 * 1.5**2))
+
+    def logit(p):
+        return torch.logit(torch.tensor(p * 0.98 + 0.01, dtype=torch.float32))[None]
+
+    ends = np.maximum(gauss(10.2, 12.0), 0.9 * gauss(45.0, 30.4))
+    ends_kp, scores = decode_ends(logit(ends), logit(gauss(45.0, 30.4)))
+    np.testing.assert_allclose(ends_kp[0], [[45.0, 30.4], [10.2, 12.0]], atol=0.15)
+    assert scores.shape == (1, 2)

@@ -25,7 +25,7 @@ from suture_bt.perception.network import (
     INPUT_SIZE,
     OUTPUT_STRIDE,
     NeedleNet,
-    decode_keypoints,
+    decode_ends,
     load_network,
 )
 from suture_bt.perception.pose_fit import MaskView, NeedleNotFound, PoseFitResult, PoseFitter
@@ -108,7 +108,7 @@ class NeedleLocalizer:
         with torch.inference_mode():
             out = self.net(x)
         prob = torch.sigmoid(out[:, 0]).numpy()
-        kp, score = decode_keypoints(out[:, 1:])
+        kp, score = decode_ends(out[:, 1], out[:, 2])
         kp_full = ((kp + 0.5) * OUTPUT_STRIDE) / s - 0.5
         return prob, kp_full, score, OUTPUT_STRIDE / s
 

@@ -1,8 +1,9 @@
 """Multi-task needle CNN: shared encoder, needle-mask head, base/tip keypoint heatmap heads.
 
 A small U-Net (about 0.2 M parameters) that runs on a downsampled image (default 480×272).
-Outputs at half the input resolution: channel 0 the needle-mask logit, channels 1-2 the base
-and tip heatmap logits. Keypoints are decoded with a sub-pixel soft-argmax around the peak.
+Outputs at half the input resolution: channel 0 the coarse needle-mask logit, channel 1 a
+heatmap of both needle ends (the rendered ends look alike), channel 2 a heatmap of the base.
+Peaks are decoded to sub-pixel positions (:func:`decode_ends`).
 Weights load with ``torch.load(weights_only=True)``; a missing or mismatched file raises
 :class:`WeightsError` naming the file.
 """
@@ -21,7 +22,7 @@ INPUT_SIZE = (480, 272)
 #: Output stride relative to the network input.
 OUTPUT_STRIDE = 2
 DEFAULT_WEIGHTS = Path(__file__).with_name("weights") / "needle_net.pt"
-WEIGHTS_FORMAT = "suture_bt.needle_net.v1"
+WEIGHTS_FORMAT = "suture_bt.needle_net.v2"
 
 
 class WeightsError(RuntimeError):
@@ -115,6 +116,35 @@ def decode_keypoints(heat: torch.Tensor) -> tuple[np.ndarray, np.ndarray]:
                 off.append(0.0)
         out[i] = (u0[i] + off[0], v0[i] + off[1])
     return out.reshape(B, K, 2), score.reshape(B, K)
+
+
+def decode_ends(
+    ends_logits: torch.Tensor, base_logits: torch.Tensor, suppress: int = 4
+) -> tuple[np.ndarray, np.ndarray]:
+    """The two needle ends (B, 2, 2) in output pixels, ordered (base, tip), and their scores.
+
+    Two peaks of the both-ends heatmap (the second outside ``suppress`` pixels of the first),
+    each sub-pixel; the one where the base heatmap is higher is called the base.
+    """
+    B, h, w = ends_logits.shape
+    first, s1 = decode_keypoints(ends_logits[:, None])
+    masked = ends_logits.clone()
+    yy = torch.arange(h)[:, None]
+    xx = torch.arange(w)[None, :]
+    for b in range(B):
+        u, v = first[b, 0]
+        near = (xx - u) ** 2 + (yy - v) ** 2 <= suppress**2
+        masked[b][near] = -1e4
+    second, s2 = decode_keypoints(masked[:, None])
+    ends = np.concatenate([first, second], 1)
+    scores = np.concatenate([s1, s2], 1)
+    base_p = torch.sigmoid(base_logits).numpy()
+    for b in range(B):
+        at = [base_p[b, int(round(v)), int(round(u))] for u, v in ends[b]]
+        if at[1] > at[0]:
+            ends[b] = ends[b, ::-1]
+            scores[b] = scores[b, ::-1]
+    return ends, scores
 
 
 def save_weights(net: NeedleNet, path: Path, meta: dict | None = None) -> None:

@@ -1,7 +1,8 @@
 """Train the needle network from a dataset folder (no simulator imports: it reads files).
 
-Losses at the network's output stride: BCE + soft Dice on the needle coverage, and a
-penalty-reduced focal BCE on Gaussian base/tip heatmaps (visible keypoints only). Random
+Losses at the network's output stride: BCE + soft Dice on the coarse needle mask (cells the
+needle covers by more than 2 %), and a penalty-reduced focal BCE on Gaussian heatmaps of both
+needle ends (they look alike) and of the base (visible keypoints only). Random
 crops biased towards the needle, random scale, flips and colour gain. Seeded; a tqdm bar;
 validation (mask IoU, keypoint pixel error) printed at the end of every round.
 """
@@ -22,6 +23,8 @@ from tqdm import tqdm
 from suture_bt.perception.network import OUTPUT_STRIDE, NeedleNet, count_parameters, save_weights
 
 HEATMAP_SIGMA = 1.5  # output pixels
+#: An output cell is "needle" when the needle covers more than this share of it.
+MASK_COVERAGE = 0.02
 
 
 @dataclass
@@ -107,8 +110,10 @@ class Batcher:
         if augment:
             im = np.clip(im * self.rng.uniform(0.8, 1.2) * self.rng.uniform(0.95, 1.05, 3), 0, 1)
         oh, ow = ch // OUTPUT_STRIDE, cw // OUTPUT_STRIDE
-        m_out = cv2.resize(np.ascontiguousarray(m), (ow, oh), interpolation=cv2.INTER_AREA)
-        heat = heatmap_targets(_to_output_px(kp), vis, oh, ow)
+        cov_out = cv2.resize(np.ascontiguousarray(m), (ow, oh), interpolation=cv2.INTER_AREA)
+        m_out = (cov_out > MASK_COVERAGE).astype(np.float32)
+        bt = heatmap_targets(_to_output_px(kp), vis, oh, ow)
+        heat = np.stack([bt.max(0), bt[0]])  # both ends (they look alike), and the base
         im = np.ascontiguousarray(im.transpose(2, 0, 1), dtype=np.float32)
         return im, m_out.astype(np.float32), heat, kp, vis
 
@@ -141,7 +146,7 @@ def losses(out: torch.Tensor, m: torch.Tensor, h: torch.Tensor) -> tuple[torch.T
 @torch.inference_mode()
 def evaluate(net: NeedleNet, data: dict, idx: np.ndarray) -> dict:
     """Mask IoU (coverage > 0.5) and base/tip error (input px) over whole validation images."""
-    from suture_bt.perception.network import decode_keypoints
+    from suture_bt.perception.network import decode_ends
 
     net.eval()
     inter = union = 0.0
@@ -159,14 +164,17 @@ def evaluate(net: NeedleNet, data: dict, idx: np.ndarray) -> dict:
             )
             for i in ii
         ]
-        gm = np.stack(gm) > 0.5
+        gm = np.stack(gm) > MASK_COVERAGE
         inter += float((pm & gm).sum())
         union += float((pm | gm).sum())
-        kp, _ = decode_keypoints(out[:, 1:])
+        kp, _ = decode_ends(out[:, 1], out[:, 2])
         kp_in = (kp + 0.5) * OUTPUT_STRIDE - 0.5
         gt = data["keypoints"][ii]
         vis = data["visible"][ii]
-        e = np.linalg.norm(kp_in - gt, axis=-1)
+        # Ends are matched to the labels in whichever order fits (base/tip look alike).
+        e = np.minimum(
+            np.linalg.norm(kp_in - gt, axis=-1), np.linalg.norm(kp_in[:, ::-1] - gt, axis=-1)
+        )
         errs.extend(e[vis].tolist())
     net.train()
     errs = np.array(errs) if errs else np.array([np.nan])
