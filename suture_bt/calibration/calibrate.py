@@ -32,16 +32,18 @@ from suture_bt.calibration.calibration_pose import (
 )
 from suture_bt.calibration.geometric_baseline import pnp_offset
 from suture_bt.calibration.jaw_keypoints import project_keypoints
+from suture_bt.calibration.keypoint_net import KEYPOINT_SIGMA_PX
 from suture_bt.calibration.scene_geometry import PSM_BASES, REFERENCE_SIZE, eye_pose
 
 #: Δq̂ beyond the bounds by more than this factor is implausible.
 PLAUSIBLE_FACTOR = 1.2
-#: Keypoint residual (RMS px at 1920×1080) above which detections do not fit the arm model.
-MAX_RESIDUAL_PX = 6.0
+#: Keypoint residual (RMS over keypoints of error / KEYPOINT_SIGMA_PX) above which detections
+#: do not fit the arm model.
+MAX_RESIDUAL_SIGMA = 4.0
 #: Fine-stage peak mass below which a keypoint counts as not found.
 MIN_KEYPOINT_CONFIDENCE = 0.3
-#: Residual scale of the confidence: confidence = min keypoint confidence · exp(−½(r/σ)²).
-RESIDUAL_SIGMA_PX = 3.0
+#: confidence = min keypoint confidence · exp(−½ (r / RESIDUAL_SCALE)²), r the normalised residual.
+RESIDUAL_SCALE = 2.0
 
 
 class CalibrationFailed(RuntimeError):
@@ -62,7 +64,7 @@ class CalibrationResult:
     confidence: float  # 0..1
     keypoints: np.ndarray  # 4×2 image px (left eye)
     keypoint_confidence: np.ndarray  # 4
-    residual_px: float  # RMS keypoint residual of the estimate, at 1920×1080
+    residual_px: float  # RMS keypoint residual of the estimate, px at 1920×1080
     q_meas: np.ndarray  # measured joints at capture
     stamp: float  # capture time (simulated s)
     method: str
@@ -114,8 +116,10 @@ def estimate_offset(
     q_est[:3] += offset
     reproj = project_keypoints(q_est, CALIBRATION_JAW, T_base, cam)[0]
     to_ref = REFERENCE_SIZE[1] / cam.height
-    residual = float(np.sqrt(np.mean(np.sum((reproj - kp) ** 2, 1)))) * to_ref
-    confidence = float(np.min(conf) * np.exp(-0.5 * (residual / RESIDUAL_SIGMA_PX) ** 2))
+    dist = np.linalg.norm(reproj - kp, axis=1) * to_ref
+    residual = float(np.sqrt(np.mean(dist**2)))
+    normalised = float(np.sqrt(np.mean((dist / np.asarray(KEYPOINT_SIGMA_PX)) ** 2)))
+    confidence = float(np.min(conf) * np.exp(-0.5 * (normalised / RESIDUAL_SCALE) ** 2))
     result = CalibrationResult(
         arm=arm,
         offset=offset,
@@ -127,6 +131,7 @@ def estimate_offset(
         stamp=stamp,
         method=method,
         compute_ms=(time.perf_counter() - t0) * 1e3,
+        extra={"residual_sigma": normalised},
     )
     check_result(result)
     return result
@@ -141,11 +146,13 @@ def check_result(r: CalibrationResult) -> None:
             f"keypoint {worst} confidence {r.keypoint_confidence[worst]:.2f} "
             f"< {MIN_KEYPOINT_CONFIDENCE} (jaw out of view or occluded?)",
         )
-    if r.residual_px > MAX_RESIDUAL_PX:
+    normalised = r.extra.get("residual_sigma", 0.0)
+    if normalised > MAX_RESIDUAL_SIGMA:
         raise CalibrationFailed(
             "keypoints_not_visible",
-            f"detected keypoints fit no arm pose (residual {r.residual_px:.1f} px "
-            f"> {MAX_RESIDUAL_PX} px): jaw out of view, occluded or another object",
+            f"detected keypoints fit no arm pose (residual {r.residual_px:.1f} px, "
+            f"{normalised:.1f} σ > {MAX_RESIDUAL_SIGMA} σ): jaw out of view, occluded or another "
+            "object",
         )
     excess = np.abs(r.offset) / OFFSET_BOUND
     if np.any(excess > PLAUSIBLE_FACTOR):

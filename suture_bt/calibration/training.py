@@ -3,8 +3,9 @@
 The regressor's data are the 3-D keypoints of the offset arm (forward kinematics of
 q_meas + Δq on joints 1-3) projected through the SRC camera model, with Δq uniform within the
 bounds, the measured joints jittered around the calibration pose (the servo may stop short),
-and fresh Gaussian pixel noise (σ drawn per sample up to ``noise_px_max``) every epoch, so the
-MLP learns the keypoint detector's noise level rather than a noiseless inverse.
+and fresh Gaussian pixel noise every epoch (per keypoint, the detector's typical error
+``KEYPOINT_SIGMA_PX`` times a factor drawn per sample up to ``noise_scale_max``), so the MLP
+learns to weigh the keypoints as their detection deserves rather than a noiseless inverse.
 """
 
 from __future__ import annotations
@@ -60,9 +61,13 @@ def projected_dataset(arm: str, n: int, seed: int) -> ProjectedSet:
     return ProjectedSet(pixels, q_meas, offsets)
 
 
-def noisy(pixels: np.ndarray, rng: np.random.Generator, noise_px_max: float) -> np.ndarray:
-    """Pixels with Gaussian noise whose σ is drawn uniformly in [0, noise_px_max] per sample."""
-    sigma = rng.uniform(0.0, noise_px_max, (pixels.shape[0], 1, 1))
+def noisy(pixels: np.ndarray, rng: np.random.Generator, noise_scale_max: float) -> np.ndarray:
+    """Pixels with Gaussian noise: per keypoint the detector's typical error
+    (``KEYPOINT_SIGMA_PX``) times a factor drawn uniformly in [0, noise_scale_max] per sample."""
+    from suture_bt.calibration.keypoint_net import KEYPOINT_SIGMA_PX
+
+    scale = rng.uniform(0.0, noise_scale_max, (pixels.shape[0], 1, 1))
+    sigma = np.asarray(KEYPOINT_SIGMA_PX)[None, :, None] * scale
     return pixels + rng.normal(size=pixels.shape) * sigma
 
 
@@ -73,7 +78,7 @@ def train_arm(
     epochs: int = 60,
     batch: int = 256,
     lr: float = 1e-3,
-    noise_px_max: float = 1.5,
+    noise_scale_max: float = 1.5,
     seed: int = 0,
     progress: bool = True,
 ) -> OffsetMLP:
@@ -81,7 +86,7 @@ def train_arm(
     torch.manual_seed(seed)
     rng = np.random.default_rng(seed + 1)
     model = OffsetMLP()
-    x0 = regressor_features(arm, noisy(data.pixels, rng, noise_px_max), data.q_meas)
+    x0 = regressor_features(arm, noisy(data.pixels, rng, noise_scale_max), data.q_meas)
     model.set_scaling(x0, data.offsets)
     y = model.scale_y(data.offsets)
     opt = torch.optim.Adam(model.parameters(), lr=lr)
@@ -91,7 +96,7 @@ def train_arm(
     bar = tqdm(range(epochs), desc=f"offset MLP {arm}", disable=not progress)
     for _ in bar:
         x = model.scale_x(
-            regressor_features(arm, noisy(data.pixels, rng, noise_px_max), data.q_meas)
+            regressor_features(arm, noisy(data.pixels, rng, noise_scale_max), data.q_meas)
         )
         perm = torch.randperm(n)
         total = 0.0
@@ -113,7 +118,7 @@ def train_regressor(
     *,
     seed: int = 0,
     epochs: int = 60,
-    noise_px_max: float = 1.5,
+    noise_scale_max: float = 1.5,
     progress: bool = True,
 ) -> OffsetRegressor:
     """Train both arms' regressors on projected keypoints (seeded, reproducible)."""
@@ -121,10 +126,10 @@ def train_regressor(
     for k, arm in enumerate(reg.models):
         data = projected_dataset(arm, n_per_arm, seed=seed * 100 + k)
         reg.models[arm] = train_arm(
-            arm, data, epochs=epochs, noise_px_max=noise_px_max, seed=seed, progress=progress
+            arm, data, epochs=epochs, noise_scale_max=noise_scale_max, seed=seed, progress=progress
         )
     reg.meta.update(
-        {"n_per_arm": n_per_arm, "seed": seed, "epochs": epochs, "noise_px_max": noise_px_max}
+        {"n_per_arm": n_per_arm, "seed": seed, "epochs": epochs, "noise_scale_max": noise_scale_max}
     )
     return reg
 
@@ -133,12 +138,31 @@ def train_regressor(
 
 
 def augment_images(images: np.ndarray, rng: np.random.Generator) -> np.ndarray:
-    """Brightness ×[0.5, 2] (clipped, as the camera does) and Gaussian noise σ ∈ [0, 4] levels."""
+    """Brightness ×[0.5, 2] (clipped, as the camera does) and Gaussian noise σ ∈ [0, 4] levels.
+
+    Noise comes from a fixed bank of standard-normal images, rolled by a random amount per
+    sample (drawing 3 M normals per batch would cost more than the networks).
+    """
+    n, h, w, c = images.shape
+    bank = _noise_bank(h, w, c)
     x = images.astype(np.float32)
-    b = rng.uniform(0.5, 2.0, (x.shape[0], 1, 1, 1)).astype(np.float32)
-    s = rng.uniform(0.0, 4.0, (x.shape[0], 1, 1, 1)).astype(np.float32)
-    x = x * b + rng.standard_normal(x.shape, dtype=np.float32) * s
+    b = rng.uniform(0.5, 2.0, n).astype(np.float32)
+    s = rng.uniform(0.0, 4.0, n).astype(np.float32)
+    for i in range(n):
+        noise = np.roll(bank[rng.integers(len(bank))], tuple(rng.integers(0, [h, w])), (0, 1))
+        x[i] = x[i] * b[i] + noise * s[i]
     return np.clip(np.rint(x), 0, 255).astype(np.uint8)
+
+
+_NOISE: dict = {}
+
+
+def _noise_bank(h: int, w: int, c: int) -> np.ndarray:
+    """8 fixed standard-normal images (seeded) of the given size."""
+    key = (h, w, c)
+    if key not in _NOISE:
+        _NOISE[key] = np.random.default_rng(12345).standard_normal((8, h, w, c), dtype=np.float32)
+    return _NOISE[key]
 
 
 def _shift(images: np.ndarray, du: int, dv: int) -> np.ndarray:
@@ -271,14 +295,15 @@ def train_calibration(
     from suture_bt.calibration.offset_regressor import WEIGHTS_PATH as REG_PATH
 
     folder = Path(out_dir) if out_dir else REG_PATH.parent
-    torch.set_num_threads(max(1, min(2, torch.get_num_threads())))
+    # One thread: with the CPU shared, two intra-op threads ran 10-30× slower (measured).
+    torch.set_num_threads(1)
     reg = train_regressor(20000, seed=seed, epochs=60, progress=progress)
     reg.save(folder / REG_PATH.name)
     data = load_windows(data_dir)
     n_val = min(VALIDATION_WINDOWS, data["images"].shape[0] // 5)
     train = {k: v[: len(v) - n_val] for k, v in data.items()}
     det = train_keypoint_detector(
-        train, epochs=8, max_steps=steps, seed=seed, minutes=minutes, progress=progress
+        train, epochs=30, max_steps=steps, seed=seed, minutes=minutes, progress=progress
     )
     det.meta["validation_px"] = validation_error(
         det, {k: v[len(v) - n_val :] for k, v in data.items()}
