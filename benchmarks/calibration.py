@@ -50,15 +50,18 @@ SEED_PAPER = "0.2 ± 0.2° per joint (joints 1-3)"
 
 
 def port_joint_targets(arm: str) -> list[np.ndarray]:
-    """Desired true joints putting ``arm``'s tip at each of the 8 ports (tool into the port)."""
+    """Desired true joints putting ``arm``'s tip at each of the 8 ports: of 600 seeded tool
+    orientations pointing into the tissue, the reachable one closest to the port's inward
+    normal (a fixed, reproducible choice)."""
+    from scipy.spatial.transform import Rotation
+
     T_base = PSM_BASES[arm]
+    rots = Rotation.random(600, random_state=3).as_matrix()
     targets = []
     for port in PhantomModel().ports():
-        z = -port.normal
-        for roll in np.linspace(0, 2 * np.pi, 12, endpoint=False):
-            x0 = np.cross(z, [np.cos(roll), np.sin(roll), 0.3])
-            x = x0 / np.linalg.norm(x0)
-            R = np.stack([x, np.cross(z, x), z], 1)
+        inward = -port.normal
+        order = np.argsort(-(rots[:, :, 2] @ inward))
+        for R in rots[order]:
             try:
                 q = inverse_kinematics(invert(T_base) @ make_transform(R, port.position))
             except UnreachablePoseError:
