@@ -20,8 +20,8 @@ def test_pose_identifies_the_offset_uniquely(arm):
     rep = uniqueness_report(arm, samples=8000, grid_levels=5)
     assert rep.ok, rep
     assert rep.max_condition_number < 20
-    assert rep.min_singular_value > 5.0  # px per degree / mm at 1920×1080
-    assert np.all(rep.worst_crb_std < 0.12)  # (deg, deg, mm) per px of keypoint noise
+    assert rep.min_singular_value > 4.0  # px per degree / mm at 1920×1080
+    assert np.all(rep.worst_crb_std < 0.2)  # (deg, deg, mm) per px of keypoint noise
     assert rep.pairs_checked > 0  # the KD-tree test did compare close keypoint vectors
     assert rep.min_depth > 0.02 and rep.min_margin_px > 20
 

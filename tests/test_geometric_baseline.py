@@ -5,14 +5,15 @@ import pytest
 
 from suture_bt.calibration.calibration_pose import CALIBRATION_JAW, CALIBRATION_POSES
 from suture_bt.calibration.geometric_baseline import joints123_from_pitch_point, pnp_offset
-from suture_bt.calibration.jaw_keypoints import keypoints_in_base, project_keypoints
+from suture_bt.calibration.jaw_keypoints import project_keypoints
 from suture_bt.calibration.scene_geometry import PSM_BASES, endoscope_model
+from suture_bt.kinematics import frame_transforms
 
 
 def test_closed_form_inverts_the_pitch_point(rng):
     for _ in range(5):
         q = np.r_[rng.uniform(-0.8, 0.8, 2), rng.uniform(0.05, 0.2), rng.uniform(-1, 1, 3)]
-        p = keypoints_in_base(q, 0.0)[0, 0]
+        p = frame_transforms(q)[4][:3, 3]  # wrist-pitch point
         np.testing.assert_allclose(joints123_from_pitch_point(p), q[:3], atol=1e-12)
 
 

@@ -7,8 +7,11 @@ which is only possible where it is injective and well conditioned over the whole
 arm's side of the image) that kept, for all 27 corners/mid-points of the box: every keypoint in
 the left image with a 30 px margin, 25 mm or more in front of the lens, above the tissue
 (z ≥ 76 mm; ≥ 84 mm over the ridge), keypoints ≥ 30 px apart, the wrist seen side-on; and
-minimised the worst Cramér-Rao standard deviation of Δq for 1 px keypoint noise.
-:func:`uniqueness_report` re-checks this (tests/test_calibration_pose.py).
+minimised the worst Cramér-Rao standard deviation of Δq for 1 px keypoint noise. (The search
+used an earlier keypoint set, the wrist joint-axis points instead of the clevis corners;
+:func:`uniqueness_report` re-checks the poses with the current keypoints, see
+tests/test_calibration_pose.py: condition number ≤ 17, ≥ 4.6 px per degree/mm, worst
+Cramér-Rao std ≤ 0.13°, 0.04°, 0.17 mm per px of noise.)
 """
 
 from __future__ import annotations

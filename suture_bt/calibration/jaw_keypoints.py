@@ -1,20 +1,22 @@
 """The 4 calibration keypoints on the PSM wrist and jaw, and their 3-D positions for joint vectors.
 
-Why these points: they are rigid features of the instrument's last links that a camera sees
-(the wrist-pitch clevis axle, the wrist-yaw axle and the two jaw tips), they are not collinear
-once the jaw is open, and they span the wrist so that their image encodes the wrist's position
-and orientation — which, with joints 4-6 and the jaw read exactly from the encoders, fixes the
-biased joints 1-3 (DESIGN.md §5).
+Why these points: they are sharp, visible corners of the instrument's last links (two corners
+of the wrist clevis and the two jaw tips), not collinear, and they span the wrist so that
+their image encodes its position and orientation — which, with joints 4-6 and the jaw read
+exactly from the encoders, fixes the biased joints 1-3 (DESIGN.md §5). (Points on the joint
+axes inside the clevis were tried first: a CNN found them only to 2.5-5.6 px, the corners and
+tips to about 0.6 px.)
 
-Definitions (modified-DH frames of ``suture_bt.kinematics``):
+Definitions (modified-DH frames of ``suture_bt.kinematics``; geometry of the sim's body,
+``suture_bt.sim.psm_body``):
 
-0. ``wrist_pitch``: origin of frame 5 (on the wrist-pitch axis, at the end of the shaft);
-1. ``wrist_yaw``: origin of frame 6 (on the wrist-yaw axis, where both jaws pivot);
+0. ``clevis_corner_a`` / 1. ``clevis_corner_b``: the clevis box (frame 5, x ∈ [−2, 11] mm,
+   y ∈ ±2.2 mm, z ∈ ±3 mm) corners at x = 11 mm (the jaw end), y = −2.2 mm, z = −3 / +3 mm;
+   both face the endoscope at the calibration poses of both arms;
 2. ``jaw_tip_a`` / 3. ``jaw_tip_b``: the centres of the two jaw blades' end faces. Blade a
    turns by +jaw/2 and blade b by −jaw/2 about the yaw axis (frame 6 z); in its own turned
    frame each blade runs along +y to ``JAW_TIP_LENGTH`` and sits ``JAW_HALF_THICKNESS`` to the
-   −x (a) or +x (b) side of the frame-6 y-z plane, as the sim's blades do
-   (``suture_bt.sim.psm_body``: JAW_LENGTH, JAW_THICKNESS).
+   −x (a) or +x (b) side of the frame-6 y-z plane (JAW_LENGTH, JAW_THICKNESS of the body).
 
 Everything is vectorised over a batch of joint vectors (N×6) for data generation.
 """
@@ -25,11 +27,13 @@ import numpy as np
 
 from suture_bt.kinematics.psm import L_PITCH2YAW, L_RCC, L_TOOL
 
-KEYPOINT_NAMES = ("wrist_pitch", "wrist_yaw", "jaw_tip_a", "jaw_tip_b")
+KEYPOINT_NAMES = ("clevis_corner_a", "clevis_corner_b", "jaw_tip_a", "jaw_tip_b")
 NUM_KEYPOINTS = len(KEYPOINT_NAMES)
 #: Jaw blade length from the wrist-yaw axis and half its thickness (m), as the sim's blades.
 JAW_TIP_LENGTH = 0.0125
 JAW_HALF_THICKNESS = 0.0006
+#: The two clevis corners in frame 5 (m).
+CLEVIS_CORNERS = np.array([[0.011, -0.0022, -0.003], [0.011, -0.0022, 0.003]])
 
 
 def _dh_batch(alpha: float, a: float, theta: np.ndarray, d: np.ndarray) -> np.ndarray:
@@ -62,7 +66,7 @@ def wrist_frames(q: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
 
 
 def keypoints_in_frame6(jaw: np.ndarray) -> np.ndarray:
-    """The 4 keypoints in frame 6 (N×4×3) for jaw angles (N,) in rad."""
+    """The keypoints in frame 6 (N×4×3) for jaw angles (N,) in rad (0, 1: unused, zero)."""
     jaw = np.atleast_1d(np.asarray(jaw, dtype=float))
     pts = np.zeros((jaw.shape[0], NUM_KEYPOINTS, 3))
     for k, side in ((2, 1.0), (3, -1.0)):
@@ -81,7 +85,7 @@ def keypoints_in_base(q, jaw) -> np.ndarray:
     T5, T6 = wrist_frames(q)
     local = keypoints_in_frame6(jaw)
     out = np.einsum("nij,nkj->nki", T6[:, :3, :3], local) + T6[:, None, :3, 3]
-    out[:, 0] = T5[:, :3, 3]
+    out[:, :2] = np.einsum("nij,kj->nki", T5[:, :3, :3], CLEVIS_CORNERS) + T5[:, None, :3, 3]
     return out
 
 

@@ -6,7 +6,7 @@ shortfall, the other arm at its start or calibration pose, and renders the left 
 window — centred where the arm is *expected* from its measured joints, exactly as
 ``calibrate`` will — at the network's input size (rendered at 2× and box-averaged 2×2, as a
 full-resolution capture is box-averaged 4×4). Labels come from the simulator's own body: the
-pybullet link frames of the wrist and jaw blades (``PSMBody.link_pose``), projected into the
+pybullet link frames of the clevis and jaw blades (``PSMBody.link_pose``), projected into the
 window. Pixels outside the camera's image are black, as in a real capture.
 
 Layout (``out/``): ``calibration_XXXX.npz`` shards with ``images`` (n, 256, 256, 3) uint8,
@@ -30,7 +30,11 @@ from suture_bt.calibration.calibration_pose import (
     OFFSET_BOUND,
     expected_keypoints,
 )
-from suture_bt.calibration.jaw_keypoints import JAW_HALF_THICKNESS, JAW_TIP_LENGTH
+from suture_bt.calibration.jaw_keypoints import (
+    CLEVIS_CORNERS,
+    JAW_HALF_THICKNESS,
+    JAW_TIP_LENGTH,
+)
 from suture_bt.calibration.keypoint_net import INPUT_SIZE, Window, window_around
 from suture_bt.calibration.scene_geometry import ARM_NAMES
 from suture_bt.calibration.training import WINDOW_JITTER
@@ -43,9 +47,10 @@ OFFSET_MARGIN = 1.1
 
 def sim_keypoints_world(body) -> np.ndarray:
     """The 4 keypoints (4×3, world) from the simulated arm's own link frames (the labels)."""
-    from suture_bt.sim.psm_body import LINK_JAWS, LINK_WRIST_PITCH, LINK_WRIST_YAW
+    from suture_bt.sim.psm_body import LINK_JAWS, LINK_WRIST_PITCH
 
-    pts = [body.link_pose(LINK_WRIST_PITCH)[:3, 3], body.link_pose(LINK_WRIST_YAW)[:3, 3]]
+    T5 = body.link_pose(LINK_WRIST_PITCH)
+    pts = list(CLEVIS_CORNERS @ T5[:3, :3].T + T5[:3, 3])
     for link, side in zip(LINK_JAWS, (-1.0, 1.0), strict=True):
         T = body.link_pose(link)
         pts.append(
