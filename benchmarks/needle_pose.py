@@ -104,7 +104,15 @@ def _summary(rows: list[dict]) -> dict:
     }
 
 
-def run(n: int, width: int, height: int, seed: int, weights: str | None, threads: int) -> dict:
+def run(
+    n: int,
+    width: int,
+    height: int,
+    seed: int,
+    weights: str | None,
+    threads: int,
+    conditions=("unoccluded", "occluded"),
+) -> dict:
     torch.set_num_threads(threads)
     sim = SimScene(width, height)
     loc = NeedleLocalizer(sim.stereo, weights=weights)
@@ -114,6 +122,8 @@ def run(n: int, width: int, height: int, seed: int, weights: str | None, threads
     results = {}
     try:
         for ci, cond in enumerate(("unoccluded", "occluded")):
+            if cond not in conditions:
+                continue
             rows = []
             bar = tqdm(range(n), desc=f"{cond} {width}x{height}")
             for i in bar:
@@ -178,10 +188,12 @@ def main(argv=None) -> int:
     ap.add_argument("--seed", type=int, default=HELD_OUT_SEED)
     ap.add_argument("--weights", help="network weights (default: shipped)")
     ap.add_argument("--threads", type=int, default=1, help="torch threads (default 1)")
+    ap.add_argument("--only", choices=["unoccluded", "occluded"], help="run one condition")
     args = ap.parse_args(argv)
     w, h = (int(v) for v in args.resolution.lower().split("x"))
     t0 = time.time()
-    res = run(args.n, w, h, args.seed, args.weights, args.threads)
+    conds = (args.only,) if args.only else ("unoccluded", "occluded")
+    res = run(args.n, w, h, args.seed, args.weights, args.threads, conds)
     meta = {"resolution": [w, h], "n": args.n, "seed": args.seed, "seconds": time.time() - t0}
     summary = {k: {kk: vv for kk, vv in v.items() if kk != "per_scene"} for k, v in res.items()}
     print(json.dumps(summary | {"meta": meta}, indent=2))

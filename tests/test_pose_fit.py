@@ -91,3 +91,21 @@ def test_empty_mask_raises_needle_not_found():
     empty = MaskView(np.zeros((480, 640), bool))
     with pytest.raises(NeedleNotFound, match="too few needle edge points"):
         PoseFitter(st, MODEL).fit(empty, empty)
+
+
+def test_free_space_term_is_zero_at_the_true_pose_and_positive_off_it():
+    from suture_bt.perception.pose_fit import FreeSpaceTerm
+
+    st = stereo(960, 540)
+    T = random_needle_pose(np.random.default_rng(5), 0.08, 0.1)
+    left, right = _views(st, T)
+    views = []
+    for v in (left, right):
+        free = (~v.mask).astype(np.float64)  # everything but the needle is free (distance 1)
+        views.append(MaskView(v.mask, v.origin, free, v.origin))
+    term = FreeSpaceTerm(st, MODEL, views)
+    moved = T.copy()
+    moved[:3, 3] += (0.003, 0.0, 0.0)
+    r = term(np.stack([T, moved]))
+    # Off the true pose part of the arc leaves the crop (no evidence there: residual 0).
+    assert np.mean(r[0] > 0.5) < 0.2 and np.mean(r[1] > 0.5) > 0.3

@@ -98,3 +98,23 @@ def refine_mask(
     if len(small):
         m[np.isin(lab, small)] = 0
     return MaskView(m.astype(bool), (x0, y0))
+
+
+def free_space_dt(
+    rgb: np.ndarray, view: MaskView, margin: float = 0.6, max_blue_minus_red: float = -20.0
+) -> tuple[np.ndarray, tuple[int, int]]:
+    """Distance (px) from each certainly-needle-free pixel to the nearest pixel that is not,
+    over the mask's box grown by ``margin`` of its size; (map, its top-left pixel).
+
+    Certainly free = clearly red (tissue, cavity): blue − red < ``max_blue_minus_red``. Grey
+    pixels (needle, arms, jaws: possible occluders) are not free.
+    """
+    H, W = rgb.shape[:2]
+    h, w = view.mask.shape
+    x0, y0 = view.origin
+    mx, my = int(margin * max(w, h)) + 4, int(margin * max(w, h)) + 4
+    a, b = max(x0 - mx, 0), min(x0 + w + mx, W)
+    c, d = max(y0 - my, 0), min(y0 + h + my, H)
+    crop = rgb[c:d, a:b].astype(np.int16)
+    free = (crop[..., 2] - crop[..., 0] < max_blue_minus_red).astype(np.uint8)
+    return cv2.distanceTransform(free, cv2.DIST_L2, 3), (a, c)

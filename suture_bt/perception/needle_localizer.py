@@ -20,7 +20,12 @@ import torch
 
 from suture_bt.geometry import NeedleModel
 from suture_bt.interfaces import StereoCameraModel
-from suture_bt.perception.colour_refine import ColourRule, coarse_components, refine_mask
+from suture_bt.perception.colour_refine import (
+    ColourRule,
+    coarse_components,
+    free_space_dt,
+    refine_mask,
+)
 from suture_bt.perception.network import (
     INPUT_SIZE,
     OUTPUT_STRIDE,
@@ -84,7 +89,10 @@ class NeedleLocalizer:
         weights: str | os.PathLike | None = None,
         threads: int | None = None,
         rule: ColourRule | None = None,
+        use_free_space: bool = False,
     ) -> None:
+        """``use_free_space`` adds the pose fit's free-space term (experimental: it did not
+        change the occluded-benchmark figures in a first test and is off by default)."""
         self.stereo = stereo
         self.model = model or NeedleModel()
         self.net = net if net is not None else load_network(weights)
@@ -92,6 +100,7 @@ class NeedleLocalizer:
         if threads is not None:
             torch.set_num_threads(threads)
         self.rule = rule or ColourRule()
+        self.use_free_space = use_free_space
         self.fitter = PoseFitter(stereo, self.model)
         self.input_width = INPUT_SIZE[0]
         self.coarse_threshold = 0.3
@@ -161,6 +170,9 @@ class NeedleLocalizer:
                     f"too few needle-coloured pixels in the {name} image "
                     f"({int(view.mask.sum())} < {MIN_NEEDLE_PIXELS})"
                 )
+            if self.use_free_space:
+                dt, org = free_space_dt(img, view)
+                view = MaskView(view.mask, view.origin, dt, org)
             views.append(view)
         t2 = time.perf_counter()
         fit = self.fitter.fit(views[0], views[1], ends, depth_hint=depth, warm_start=previous)

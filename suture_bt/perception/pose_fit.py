@@ -45,10 +45,67 @@ class NeedleNotFound(Exception):
 
 @dataclass(frozen=True)
 class MaskView:
-    """A needle mask (bool) of one eye, possibly a crop whose top-left pixel is ``origin``."""
+    """A needle mask (bool) of one eye, possibly a crop whose top-left pixel is ``origin``.
+
+    ``free_dt`` (optional, a crop at ``free_origin``) holds, for pixels that certainly show
+    no needle (tissue or cavity colour, not an occluder), the distance in pixels to the nearest
+    pixel that might (0 elsewhere): the model's centre-line is pulled out of free space, which
+    pins an arc whose ends are hidden without penalising occluded parts.
+    """
 
     mask: np.ndarray
     origin: tuple[int, int] = (0, 0)
+    free_dt: np.ndarray | None = None
+    free_origin: tuple[int, int] = (0, 0)
+
+
+#: Centre-line samples per eye for the free-space term, and its weight.
+N_FREE_SAMPLES = 24
+FREE_WEIGHT = 1.0
+
+
+class FreeSpaceTerm:
+    """Residuals (K, 2·M): free-space distance at the model's projected centre-line points."""
+
+    def __init__(self, stereo: StereoCameraModel, model: NeedleModel, views) -> None:
+        self.pts = model.centerline(N_FREE_SAMPLES)
+        T_left_world = invert(stereo.left.T_world_cam)
+        self.eyes = []
+        for cam, v in zip((stereo.left, stereo.right), views, strict=True):
+            if v.free_dt is None:
+                continue
+            T_eye_left = invert(cam.T_world_cam) @ invert(T_left_world)
+            self.eyes.append((cam, T_eye_left, v.free_dt.astype(np.float64), v.free_origin))
+
+    def __bool__(self) -> bool:
+        return bool(self.eyes)
+
+    def __call__(self, T: np.ndarray) -> np.ndarray:
+        out = []
+        for cam, T_el, dt, (x0, y0) in self.eyes:
+            M = T_el[None] @ T  # (K, 4, 4) needle in this eye
+            p = self.pts @ M[:, :3, :3].transpose(0, 2, 1) + M[:, None, :3, 3]
+            z = np.maximum(p[..., 2], 1e-6)
+            u = cam.fx * p[..., 0] / z + cam.cx - x0
+            v = cam.fy * p[..., 1] / z + cam.cy - y0
+            out.append(FREE_WEIGHT * _bilinear(dt, u, v))
+        return np.concatenate(out, -1)
+
+
+def _bilinear(img: np.ndarray, u: np.ndarray, v: np.ndarray) -> np.ndarray:
+    """Bilinear samples of img at (u, v); 0 outside."""
+    h, w = img.shape
+    inside = (u >= 0) & (v >= 0) & (u <= w - 1) & (v <= h - 1)
+    uc, vc = np.clip(u, 0, w - 1.001), np.clip(v, 0, h - 1.001)
+    i0, j0 = vc.astype(int), uc.astype(int)
+    fy, fx = vc - i0, uc - j0
+    val = (
+        img[i0, j0] * (1 - fx) * (1 - fy)
+        + img[i0, j0 + 1] * fx * (1 - fy)
+        + img[i0 + 1, j0] * (1 - fx) * fy
+        + img[i0 + 1, j0 + 1] * fx * fy
+    )
+    return np.where(inside, val, 0.0)
 
 
 def edge_points(view: MaskView) -> np.ndarray:
@@ -198,11 +255,20 @@ def levenberg_marquardt(
     model: NeedleModel,
     iters: int,
     sigma: float,
+    extra=None,
 ) -> tuple[np.ndarray, np.ndarray]:
-    """Batched robust LM over starts x (K, 6); returns (x, cost)."""
+    """Batched robust LM over starts x (K, 6); returns (x, cost).
+
+    ``extra(T) -> (K, M)`` adds residuals (the free-space term) to the edge residuals.
+    """
     x = np.array(x, dtype=float)
     cam = stereo.left
-    r, theta = residuals(params_to_pose(x, cam, model), rays, model)
+
+    def both(T, *a, **k):
+        r, th = residuals(T, rays, model, *a, **k)
+        return (np.concatenate([r, extra(T)], 1) if extra else r), th
+
+    r, theta = both(params_to_pose(x, cam, model))
     cost = cauchy_cost(r, sigma)
     lam = np.full(len(x), 1e-2)
     for _ in range(iters):
@@ -214,10 +280,8 @@ def levenberg_marquardt(
         rr = np.where(np.isfinite(r), r, 0.0)
         xs = x[:, None, :] + np.diag(FD_STEPS)[None]
         th6 = np.repeat(theta, 6, 0)
-        rp, _ = residuals(
+        rp, _ = both(
             params_to_pose(xs.reshape(-1, 6), cam, model).reshape(-1, 4, 4),
-            rays,
-            model,
             th6,
             cs=(np.cos(th6), np.sin(th6)),
         )
@@ -233,7 +297,7 @@ def levenberg_marquardt(
         except np.linalg.LinAlgError:
             break
         xn = x + delta
-        rn, thn = residuals(params_to_pose(xn, cam, model), rays, model, theta_start=theta)
+        rn, thn = both(params_to_pose(xn, cam, model), theta_start=theta)
         cn = cauchy_cost(rn, sigma)
         better = cn < cost
         x[better], r[better], theta[better], cost[better] = (
@@ -325,7 +389,11 @@ class PoseFitter:
             starts = np.concatenate(
                 [starts, pose_to_params(np.asarray(warm_start)[None], cam, self.model)]
             )
-        r0, _ = residuals(params_to_pose(starts, cam, self.model), coarse, self.model, grid=12)
+        free = FreeSpaceTerm(self.stereo, self.model, (left, right)) or None
+        T0 = params_to_pose(starts, cam, self.model)
+        r0, _ = residuals(T0, coarse, self.model, grid=12)
+        if free:
+            r0 = np.concatenate([r0, free(T0)], 1)
         c0 = cauchy_cost(r0, 3.0)
         order = np.argsort(c0)[: self.n_keep * 3]
         keep = [i for i in order if np.isfinite(c0[i])][: self.n_keep]
@@ -334,8 +402,8 @@ class PoseFitter:
         if not keep:
             raise NeedleNotFound("no feasible pose hypothesis from the needle's end points")
         it1, it2, it3 = self.iterations
-        x, _ = levenberg_marquardt(starts[keep], mid, self.stereo, self.model, it1, 3.0)
-        x, c = levenberg_marquardt(x, mid, self.stereo, self.model, it2, 1.0)
+        x, _ = levenberg_marquardt(starts[keep], mid, self.stereo, self.model, it1, 3.0, free)
+        x, c = levenberg_marquardt(x, mid, self.stereo, self.model, it2, 1.0, free)
         order = np.argsort(c)
         T_mid = params_to_pose(x[order], cam, self.model)
         finals = [order[0]]
@@ -345,7 +413,7 @@ class PoseFitter:
             ):
                 finals.append(k)
                 break
-        xf, cf = levenberg_marquardt(x[finals], rays, self.stereo, self.model, it3, 1.0)
+        xf, cf = levenberg_marquardt(x[finals], rays, self.stereo, self.model, it3, 1.0, free)
         if not np.isfinite(cf).any():
             raise NeedleNotFound("pose fit diverged")
         b = int(np.argmin(cf))
