@@ -41,6 +41,9 @@ MIN_KEYPOINT_SCORE = 0.15
 MIN_NEEDLE_PIXELS = 15
 #: Base and tip keypoints closer than this (full-resolution px) are not trusted as two ends.
 MIN_END_SEPARATION_PX = 8.0
+#: A fit worse than this (RMS edge residual, px; inlier share) is retried from the mask's ends.
+RETRY_RMS_PX = 0.45
+RETRY_INLIERS = 0.85
 #: Nearest needle distance considered (m), for the widest plausible wire in pixels.
 MIN_DEPTH = 0.05
 
@@ -176,6 +179,12 @@ class NeedleLocalizer:
             views.append(view)
         t2 = time.perf_counter()
         fit = self.fitter.fit(views[0], views[1], ends, depth_hint=depth, warm_start=previous)
+        if ends is not None and (fit.rms_px > RETRY_RMS_PX or fit.inlier_fraction < RETRY_INLIERS):
+            # A poor fit often means a keypoint landed off the needle (e.g. on a jaw): refit
+            # from the mask's own ends and keep whichever explains the edges better.
+            alt = self.fitter.fit(views[0], views[1], None, depth_hint=depth, warm_start=previous)
+            if alt.cost < fit.cost:
+                fit = alt
         t3 = time.perf_counter()
         return NeedleEstimate(
             T_cam_needle=fit.T_cam_needle,
