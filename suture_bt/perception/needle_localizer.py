@@ -46,6 +46,10 @@ RETRY_RMS_PX = 0.45
 RETRY_INLIERS = 0.85
 #: Nearest needle distance considered (m), for the widest plausible wire in pixels.
 MIN_DEPTH = 0.05
+#: Farthest plausible needle distance (m) for a disparity depth hint.
+MAX_DEPTH = 0.35
+#: Never treat a blob thinner than this (half width, px) as thicker than the wire.
+MIN_HALF_WIDTH_PX = 1.5
 
 
 @dataclass(frozen=True)
@@ -143,6 +147,8 @@ class NeedleLocalizer:
             disp = kp[0, :, 0] - right[:, 0]
             if np.all(disp > 1.0):
                 depth = float(np.mean(self.stereo.left.fx * self.stereo.baseline / disp))
+                if not MIN_DEPTH <= depth <= MAX_DEPTH:
+                    depth = None  # implausible disparity (ends mismatched between the eyes)
         return ends, depth
 
     def localize(
@@ -160,6 +166,7 @@ class NeedleLocalizer:
         # working distance; anything thicker touching the needle (jaws, shaft) is dropped.
         z_min = 0.85 * depth if depth is not None else MIN_DEPTH
         half_width = 1.35 * self.model.wire_radius * self.stereo.left.fx / max(z_min, MIN_DEPTH)
+        half_width = max(half_width, MIN_HALF_WIDTH_PX)
         views = []
         for eye, img in enumerate((left, right)):
             name = ("left", "right")[eye]
