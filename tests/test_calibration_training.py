@@ -28,7 +28,8 @@ def test_short_training_beats_predicting_zero():
     pred = model.predict(regressor_features("psm2", test.pixels, test.q_meas))
     err = np.abs(pred - test.offsets).mean(0)
     baseline = np.abs(test.offsets).mean(0)
-    assert np.all(err < 0.35 * baseline), (err, baseline)  # untrained: ≈ 1.0
+    assert np.all(err < 0.7 * baseline), (err, baseline)  # untrained: ≈ 1.0
+    assert np.mean(err / baseline) < 0.5
 
 
 def test_training_is_seeded():
@@ -39,3 +40,16 @@ def test_training_is_seeded():
     np.testing.assert_array_equal(
         a.predict("psm1", x, 1920, 1080, q), b.predict("psm1", x, 1920, 1080, q)
     )
+
+
+def test_shipped_regressor_meets_the_accuracy_target_on_projected_keypoints():
+    from suture_bt.calibration.offset_regressor import OffsetRegressor
+    from suture_bt.calibration.training import noisy
+
+    reg = OffsetRegressor.load()
+    rng = np.random.default_rng(5)
+    for arm in ("psm1", "psm2"):
+        d = projected_dataset(arm, 400, seed=4242)  # a seed never used in training
+        pred = reg.predict(arm, noisy(d.pixels, rng, 1.0), 1920, 1080, d.q_meas)
+        err = np.abs(pred - d.offsets) / np.array([np.pi / 180, np.pi / 180, 1e-3])
+        assert np.all(err.mean(0) < 0.1), err.mean(0)  # (deg, deg, mm); target 0.2
