@@ -186,12 +186,14 @@ class NeedleLocalizer:
             views.append(view)
         t2 = time.perf_counter()
         fit = self.fitter.fit(views[0], views[1], ends, depth_hint=depth, warm_start=previous)
-        if ends is not None and (fit.rms_px > RETRY_RMS_PX or fit.inlier_fraction < RETRY_INLIERS):
-            # A poor fit often means a keypoint landed off the needle (e.g. on a jaw): refit
-            # from the mask's own ends and keep whichever explains the edges better.
-            alt = self.fitter.fit(views[0], views[1], None, depth_hint=depth, warm_start=previous)
-            if alt.cost < fit.cost:
-                fit = alt
+        if fit.rms_px > RETRY_RMS_PX or fit.inlier_fraction < RETRY_INLIERS:
+            # A poor fit often means a keypoint landed off the needle (e.g. on a jaw) or the
+            # disparity depth was wrong: refit without the depth hint, from the keypoints and
+            # from the mask's own ends, and keep whichever explains the edges best.
+            for alt_ends in (ends, None) if ends is not None else (None,):
+                alt = self.fitter.fit(views[0], views[1], alt_ends, warm_start=previous)
+                if alt.cost < fit.cost:
+                    fit = alt
         t3 = time.perf_counter()
         return NeedleEstimate(
             T_cam_needle=fit.T_cam_needle,
