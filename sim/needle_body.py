@@ -12,7 +12,7 @@ import numpy as np
 import pybullet as p
 
 from suture_bt.geometry.needle import NeedleModel
-from suture_bt.sim.needle_mesh import write_needle_obj
+from suture_bt.sim.needle_mesh import write_needle_obj, write_needle_texture
 from suture_bt.sim.rendering import load_renderer
 from suture_bt.transforms import invert, make_transform, matrix_from_quat_xyzw, quat_xyzw
 
@@ -22,7 +22,8 @@ NEEDLE_MASS = 0.002
 #: Collision capsules along the arc's chords (only for contacts; the visual is the exact mesh).
 #: pybullet keeps at most 16 children of a compound shape and silently drops the rest.
 N_COLLISION_SEGMENTS = 15
-NEEDLE_RGBA = (0.62, 0.63, 0.66, 1.0)
+#: The texture carries the colours (grey metal, violet base band); this tints it (white: none).
+NEEDLE_RGBA = (1.0, 1.0, 1.0, 1.0)
 NEEDLE_SPECULAR = (0.9, 0.9, 0.9)
 #: Force limit of the grasp/tissue constraints (N): far above the needle's weight.
 HOLD_FORCE = 50.0
@@ -122,6 +123,8 @@ class NeedleBody:
             baseOrientation=list(quat_xyzw(T_world_com[:3, :3])),
             physicsClientId=client,
         )
+        texture = p.loadTexture(str(write_needle_texture()), physicsClientId=client)
+        p.changeVisualShape(self.id, -1, textureUniqueId=texture, physicsClientId=client)
         p.changeDynamics(
             self.id,
             -1,

@@ -1,5 +1,9 @@
 """The needle as an OBJ tube of its true wire radius, with hemispherical end caps.
 
+The base end carries a violet band (the swage, where the suture thread is attached on a real
+needle) so that images can tell base from tip: the mesh's texture coordinates put the band's
+vertices on the violet half of a two-colour texture, written next to the mesh.
+
 pybullet's capsule/cylinder visuals render about 1 mm too fat and EGL silently skips in-memory
 meshes (DESIGN.md §5), so the needle is drawn from a mesh file. Files are written once per
 geometry into a cache folder, named by a hash of their content parameters.
@@ -20,6 +24,11 @@ from suture_bt.geometry.needle import NeedleModel
 N_ALONG = 120
 N_AROUND = 16
 N_CAP = 4
+#: Length of the violet swage band at the base end, along the arc (m).
+BAND_LENGTH = 0.003
+#: Texture colours (8-bit RGB): the needle's metal is white-lit grey, the band violet.
+METAL_RGB = (158, 161, 168)
+BAND_RGB = (150, 60, 170)
 
 
 def needle_mesh_arrays(
@@ -105,10 +114,36 @@ def mesh_cache_dir() -> Path:
     return d
 
 
+def band_vertices(model: NeedleModel, V: np.ndarray) -> np.ndarray:
+    """Boolean per vertex: within ``BAND_LENGTH`` of arc from the base end (base cap included)."""
+    angle = np.mod(np.arctan2(V[:, 1], V[:, 0]) - model.tip_angle, 2 * np.pi) + model.tip_angle
+    return (model.base_angle - angle) * model.radius < BAND_LENGTH
+
+
+def write_needle_texture(folder: Path | None = None) -> Path:
+    """Write (once) the 16×16 two-colour texture: u < 0.5 band violet, u ≥ 0.5 metal grey."""
+    import cv2
+
+    name = "needle_texture_" + "_".join(map(str, BAND_RGB + METAL_RGB)) + ".png"
+    path = (folder if folder is not None else mesh_cache_dir()) / name
+    if path.exists():
+        return path
+    tex = np.zeros((16, 16, 3), np.uint8)
+    tex[:, :8] = BAND_RGB[::-1]  # OpenCV writes BGR
+    tex[:, 8:] = METAL_RGB[::-1]
+    tmp = path.with_suffix(f".{os.getpid()}.tmp.png")
+    cv2.imwrite(str(tmp), tex)
+    os.replace(tmp, path)
+    return path
+
+
 def write_needle_obj(model: NeedleModel, folder: Path | None = None) -> Path:
-    """Write (once) the needle mesh as OBJ in the needle frame, metres; return its path."""
+    """Write (once) the needle mesh as OBJ in the needle frame, metres; return its path.
+
+    Texture coordinates map the base band to the violet half of :func:`write_needle_texture`.
+    """
     key = f"{model.radius:.9g}_{model.base_angle:.9g}_{model.tip_angle:.9g}_{model.wire_radius:.9g}"
-    key += f"_{N_ALONG}_{N_AROUND}_{N_CAP}_v2"
+    key += f"_{N_ALONG}_{N_AROUND}_{N_CAP}_{BAND_LENGTH:.6g}_v3"
     name = "needle_" + hashlib.sha1(key.encode()).hexdigest()[:16] + ".obj"
     path = (folder if folder is not None else mesh_cache_dir()) / name
     if path.exists():
@@ -116,8 +151,12 @@ def write_needle_obj(model: NeedleModel, folder: Path | None = None) -> Path:
     V, N, F = needle_mesh_arrays(model)
     lines = [f"# suture-bt needle {key}", "o needle"]
     lines += [f"v {x:.9f} {y:.9f} {z:.9f}" for x, y, z in V]
+    lines += [f"vt {u:.2f} 0.5" for u in np.where(band_vertices(model, V), 0.25, 0.75)]
     lines += [f"vn {x:.6f} {y:.6f} {z:.6f}" for x, y, z in N]
-    lines += [f"f {a + 1}//{a + 1} {b + 1}//{b + 1} {c + 1}//{c + 1}" for a, b, c in F]
+    lines += [
+        f"f {a + 1}/{a + 1}/{a + 1} {b + 1}/{b + 1}/{b + 1} {c + 1}/{c + 1}/{c + 1}"
+        for a, b, c in F
+    ]
     tmp = path.with_suffix(f".{os.getpid()}.tmp")
     tmp.write_text("\n".join(lines) + "\n")
     os.replace(tmp, path)  # atomic: concurrent writers produce the same file

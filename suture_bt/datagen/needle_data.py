@@ -137,6 +137,9 @@ class SceneSampler:
         q = {a: self._arm_q(a, rng, rng.random() < 0.7) for a in ("psm1", "psm2")}
         jaw = {a: float(rng.uniform(0.0, 1.0)) for a in ("psm1", "psm2")}
         T = None
+        # A free needle's depth is drawn once (uniform over ``zr``): re-drawing it on every
+        # rejected attempt would skew the depths towards the near, easily visible ones.
+        z_free = rng.uniform(*zr)
         for attempt in range(600):
             if attempt == 300:
                 scenario = "free"
@@ -173,7 +176,7 @@ class SceneSampler:
                 T = make_transform(R, port.T[:3, 3] - R @ self.model.point_at(a))
             else:
                 cam = self.stereo.left
-                z = rng.uniform(*zr)
+                z = z_free
                 u = rng.uniform(0.15, 0.85) * cam.width
                 v = rng.uniform(0.15, 0.85) * cam.height
                 pc = np.array([(u - cam.cx) / cam.fx * z, (v - cam.cy) / cam.fy * z, z])
@@ -199,10 +202,12 @@ class SimScene:
 
     def __init__(self, width: int, height: int, seed: int = 0) -> None:
         from suture_bt.sim.camera import render_view, stereo_model
+        from suture_bt.sim.phantom_body import BLOCK_X, BLOCK_Y
         from suture_bt.sim.scene import default_scene
         from suture_bt.sim.world import World, psm_base_frame
 
         self._render_view = render_view
+        self._block_xy = (BLOCK_X, BLOCK_Y)
         self.world = World.from_scene(default_scene())
         if self.world.phantom is None:
             from suture_bt.sim.phantom_body import PhantomBody
@@ -221,10 +226,22 @@ class SimScene:
         )
 
     def _buried(self, pts_world: np.ndarray) -> np.ndarray:
-        """Points inside the tissue or below its top plane (hidden by or beside the block)."""
+        """Points inside the tissue or under the block's top face (within its footprint).
+
+        Beyond the block's edges the needle may hang lower than the tissue top (far from the
+        cameras, against the dark background); whatever the block hides there is hidden in the
+        rendered image too.
+        """
         ph = self.world.task.phantom.T_world_phantom
         q = (pts_world - ph[:3, 3]) @ ph[:3, :3]
-        under = q[:, 2] < TISSUE_TOP_Z + 0.0003
+        BLOCK_X, BLOCK_Y = self._block_xy
+        footprint = (
+            (BLOCK_X[0] - 0.002 <= q[:, 0])
+            & (q[:, 0] <= BLOCK_X[1] + 0.002)
+            & (BLOCK_Y[0] - 0.002 <= q[:, 1])
+            & (q[:, 1] <= BLOCK_Y[1] + 0.002)
+        )
+        under = footprint & (q[:, 2] < TISSUE_TOP_Z + 0.0003)
         return under | self.world.phantom.inside_tissue(pts_world)
 
     def apply(self, s: SceneSample) -> None:
