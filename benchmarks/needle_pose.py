@@ -32,6 +32,9 @@ from suture_bt.perception.pose_fit import NeedleNotFound
 from suture_bt.transforms import invert
 
 HELD_OUT_SEED = 1000
+SCEN_NAMES = ("free", "held_psm1", "held_psm2")
+#: Draws per benchmark scene until one meets its condition (visible share of the needle).
+MAX_SCENE_ATTEMPTS = 200
 
 
 def _visible_fraction(sim: SimScene, s, mask: np.ndarray) -> float:
@@ -61,6 +64,28 @@ def _occluding_arm(sim: SimScene, s, rng, tries: int = 300):
     return best
 
 
+def _draw_scene(sim: SimScene, cond: str, rng, i: int):
+    """A scene meeting ``cond`` (visible needle share): (sample, left image, share, draws)."""
+    for draws in range(1, MAX_SCENE_ATTEMPTS + 1):
+        scen = str(rng.choice(list(SCEN_NAMES), p=[0.5, 0.25, 0.25]))
+        s = sim.sampler.sample(rng, scenario=scen, zr=(0.08, 0.2))
+        if cond == "unoccluded":
+            for a in ("psm1", "psm2"):
+                if s.scenario != f"held_{a}":
+                    s.q[a] = sim.sampler._arm_q(a, rng, False)
+        else:
+            occ = _occluding_arm(sim, s, rng)
+            if occ is None:
+                continue
+            s.q[occ[1]] = occ[2]
+        sim.apply(s)
+        left, mask = sim.render("left", s, rng)
+        frac = _visible_fraction(sim, s, mask)
+        if (cond == "unoccluded" and frac >= 0.97) or (cond == "occluded" and 0.4 <= frac <= 0.9):
+            return s, left, frac, draws
+    raise RuntimeError(f"no {cond} scene in {MAX_SCENE_ATTEMPTS} draws (scene {i})")
+
+
 def _errors(T_est: np.ndarray, T_true: np.ndarray) -> tuple[float, float, float]:
     pos = float(np.linalg.norm(T_est[:3, 3] - T_true[:3, 3]) * 1e3)
     ang = float(np.degrees(Rotation.from_matrix(T_est[:3, :3].T @ T_true[:3, :3]).magnitude()))
@@ -83,7 +108,10 @@ def _summary(rows: list[dict]) -> dict:
     t1 = np.array([r["task1_mm"] for r in est])
     ok = [r["found"] and r["pos_mm"] < 2.0 and r["ang_deg"] < 5.0 for r in rows]
     ok_sym = [r["found"] and r["pos_mm"] < 2.0 and r["ang_sym_deg"] < 5.0 for r in rows]
-    t = {k: np.array([r["ms"][k] for r in est]) for k in ("network", "refine", "fit", "total")}
+    t = {
+        k: np.array([r["ms"][k] for r in est])
+        for k in ("network", "refine", "fit", "ends", "total")
+    }
     return out | {
         "mean_pos_err_mm": float(pos.mean()),
         "median_pos_err_mm": float(np.median(pos)),
@@ -93,6 +121,10 @@ def _summary(rows: list[dict]) -> dict:
         "task1_score_mm": float(t1.mean()),
         "success_rate": float(np.mean(ok)),
         "base_tip_swapped": int(np.sum((ang > 90) & (sym < 10))),
+        "ends_decided_by": {
+            k: sum(r["end_decided_by"] == k for r in est) for k in ("colour", "keypoint", "none")
+        },
+        "scenarios": {k: sum(r["scenario"] == k for r in rows) for k in sorted(SCEN_NAMES)},
         "mean_ang_err_mod_swap_deg": float(sym.mean()),
         "success_rate_mod_swap": float(np.mean(ok_sym)),
         "depth_mm_range": [
@@ -128,28 +160,15 @@ def run(
             bar = tqdm(range(n), desc=f"{cond} {width}x{height}")
             for i in bar:
                 rng = np.random.default_rng([seed, ci, i])
-                for _attempt in range(20):
-                    scen = str(rng.choice(["free", "held_psm1", "held_psm2"], p=[0.5, 0.25, 0.25]))
-                    s = sim.sampler.sample(rng, scenario=scen, zr=(0.08, 0.2))
-                    if cond == "unoccluded":
-                        for a in ("psm1", "psm2"):
-                            if s.scenario != f"held_{a}":
-                                s.q[a] = sim.sampler._arm_q(a, rng, False)
-                    else:
-                        occ = _occluding_arm(sim, s, rng)
-                        if occ is None:
-                            continue
-                        s.q[occ[1]] = occ[2]
-                    sim.apply(s)
-                    left, mask = sim.render("left", s, rng)
-                    frac = _visible_fraction(sim, s, mask)
-                    if (cond == "unoccluded" and frac >= 0.97) or (
-                        cond == "occluded" and 0.4 <= frac <= 0.9
-                    ):
-                        break
+                s, left, frac, draws = _draw_scene(sim, cond, rng, i)
                 right, _ = sim.render("right", s, rng)
                 T_true = invert(sim.stereo.left.T_world_cam) @ s.T_world_needle
-                row = {"scenario": s.scenario, "visible": frac, "depth_mm": T_true[2, 3] * 1e3}
+                row = {
+                    "scenario": s.scenario,
+                    "visible": frac,
+                    "depth_mm": T_true[2, 3] * 1e3,
+                    "draws": draws,
+                }
                 try:
                     est = loc.localize(left, right)
                     pos, ang, t1 = _errors(est.T_cam_needle, T_true)
@@ -163,6 +182,7 @@ def run(
                         "ang_sym_deg": min(ang, ang_sw),
                         "task1_mm": t1,
                         "rms_px": est.rms_px,
+                        "end_decided_by": est.end_decided_by,
                         "ms": est.timings_ms,
                     }
                 except NeedleNotFound as exc:

@@ -101,12 +101,12 @@ def refine_mask(
 
 
 def free_space_dt(
-    rgb: np.ndarray, view: MaskView, margin: float = 0.6, max_blue_minus_red: float = -20.0
+    rgb: np.ndarray, view: MaskView, margin: float = 0.6, rule: ColourRule = ColourRule()
 ) -> tuple[np.ndarray, tuple[int, int]]:
     """Distance (px) from each certainly-needle-free pixel to the nearest pixel that is not,
     over the mask's box grown by ``margin`` of its size; (map, its top-left pixel).
 
-    Certainly free = clearly red (tissue, cavity): blue − red < ``max_blue_minus_red``. Grey
+    Certainly free = fails the needle colour test (tissue, cavity, dark background). Grey
     pixels (needle, arms, jaws: possible occluders) are not free.
     """
     H, W = rgb.shape[:2]
@@ -116,5 +116,7 @@ def free_space_dt(
     a, b = max(x0 - mx, 0), min(x0 + w + mx, W)
     c, d = max(y0 - my, 0), min(y0 + h + my, H)
     crop = rgb[c:d, a:b].astype(np.int16)
-    free = (crop[..., 2] - crop[..., 0] < max_blue_minus_red).astype(np.uint8)
+    level = crop.sum(-1) / 3.0
+    grey = (crop[..., 2] - crop[..., 0] >= rule.min_blue_minus_red) & (level >= rule.min_level)
+    free = (~grey).astype(np.uint8)
     return cv2.distanceTransform(free, cv2.DIST_L2, 3), (a, c)

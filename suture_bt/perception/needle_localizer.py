@@ -5,6 +5,8 @@
 2. Each eye's coarse mask gates a full-resolution colour test (:mod:`colour_refine`).
 3. The stereo pose fit (:mod:`pose_fit`) starts from the left keypoints, with a depth hint
    from their stereo disparity, and optionally a warm start from the previous estimate.
+4. The outline cannot tell base from tip: the colour at the fitted ends (the violet swage band
+   at the base, :mod:`needle_ends`) does, else the network's base keypoint.
 Only images and the calibrated camera model are used (no ground truth).
 """
 
@@ -26,6 +28,8 @@ from suture_bt.perception.colour_refine import (
     free_space_dt,
     refine_mask,
 )
+from suture_bt.perception.needle_ends import MIN_EVIDENCE, base_evidence, swapped
+from suture_bt.perception.needle_projection import project_cam, transform_points
 from suture_bt.perception.network import (
     INPUT_SIZE,
     OUTPUT_STRIDE,
@@ -33,6 +37,7 @@ from suture_bt.perception.network import (
     decode_ends,
     load_network,
 )
+from suture_bt.perception.occlusion import end_is_occluded, extended_ends
 from suture_bt.perception.pose_fit import MaskView, NeedleNotFound, PoseFitResult, PoseFitter
 
 #: A keypoint heatmap peak below this probability is not trusted (the mask's ends are used).
@@ -63,6 +68,10 @@ class NeedleEstimate:
     ambiguity: float
     keypoints_left: np.ndarray
     keypoint_scores: np.ndarray
+    #: Colour vote for the base↔tip choice (> 0 kept, < 0 swapped) and what decided it:
+    #: "colour" (the swage band), "keypoint" (the network's base end) or "none".
+    end_evidence: float
+    end_decided_by: str
     timings_ms: dict
     fit: PoseFitResult = field(repr=False)
     masks: tuple[MaskView, MaskView] = field(repr=False)
@@ -185,30 +194,92 @@ class NeedleLocalizer:
                 view = MaskView(view.mask, view.origin, dt, org)
             views.append(view)
         t2 = time.perf_counter()
-        fit = self.fitter.fit(views[0], views[1], ends, depth_hint=depth, warm_start=previous)
-        if fit.rms_px > RETRY_RMS_PX or fit.inlier_fraction < RETRY_INLIERS:
-            # A poor fit often means a keypoint landed off the needle (e.g. on a jaw) or the
-            # disparity depth was wrong: refit without the depth hint, from the keypoints and
-            # from the mask's own ends, and keep whichever explains the edges best.
-            for alt_ends in (ends, None) if ends is not None else (None,):
-                alt = self.fitter.fit(views[0], views[1], alt_ends, warm_start=previous)
-                if alt.cost < fit.cost:
-                    fit = alt
+        fit = self._fit(views, ends, depth, previous)
+        fit = self._fit_behind_occluders(fit, left, views, half_width, previous)
         t3 = time.perf_counter()
+        T_cam, evidence, decided_by = self._orient(
+            fit.T_cam_needle, (left, right), views, kp, score
+        )
+        t4 = time.perf_counter()
         return NeedleEstimate(
-            T_cam_needle=fit.T_cam_needle,
-            T_world_needle=fit.T_world_needle,
+            T_cam_needle=T_cam,
+            T_world_needle=self.stereo.left.T_world_cam @ T_cam,
             rms_px=fit.rms_px,
             inlier_fraction=fit.inlier_fraction,
             ambiguity=fit.ambiguity,
             keypoints_left=kp[0],
             keypoint_scores=score,
+            end_evidence=evidence,
+            end_decided_by=decided_by,
             timings_ms={
                 "network": 1e3 * (t1 - t0),
                 "refine": 1e3 * (t2 - t1),
                 "fit": 1e3 * (t3 - t2),
-                "total": 1e3 * (t3 - t0),
+                "ends": 1e3 * (t4 - t3),
+                "total": 1e3 * (t4 - t0),
             },
             fit=fit,
             masks=(views[0], views[1]),
         )
+
+    def _fit(self, views, ends, depth, previous) -> PoseFitResult:
+        """Fit from the keypoints (and depth hint); a failed or poor fit is retried.
+
+        A poor fit often means a keypoint landed off the needle (e.g. on a jaw) or the
+        disparity depth was wrong: refit without the depth hint, from the keypoints and from
+        the mask's own ends, and keep whichever explains the edges best.
+        """
+        fit = None
+        try:
+            fit = self.fitter.fit(views[0], views[1], ends, depth_hint=depth, warm_start=previous)
+        except NeedleNotFound:
+            if ends is None and depth is None:
+                raise
+        if fit is None or fit.rms_px > RETRY_RMS_PX or fit.inlier_fraction < RETRY_INLIERS:
+            for alt_ends in (ends, None) if ends is not None else (None,):
+                try:
+                    alt = self.fitter.fit(views[0], views[1], alt_ends, warm_start=previous)
+                except NeedleNotFound:
+                    continue
+                if fit is None or alt.cost < fit.cost:
+                    fit = alt
+        if fit is None:
+            raise NeedleNotFound("no pose explains the needle's outline (every start failed)")
+        return fit
+
+    def _fit_behind_occluders(
+        self, fit: PoseFitResult, left: np.ndarray, views, half_width: float, previous
+    ) -> PoseFitResult:
+        """Refit with a visible end that touches an occluder pushed on behind it (see
+        :mod:`occlusion`); keep whichever fit explains the edges best."""
+        ends = project_cam(
+            self.stereo.left,
+            transform_points(fit.T_cam_needle, np.stack([self.model.base, self.model.tip])),
+        )
+        radius = 2.0 * half_width + 3.0
+        occluded = tuple(end_is_occluded(left, views[0], e, radius, self.rule) for e in ends)
+        self.last_occluded_ends = occluded
+        for hyp in extended_ends((ends[0], ends[1]), occluded):
+            try:
+                alt = self.fitter.fit(views[0], views[1], hyp, warm_start=previous)
+            except NeedleNotFound:
+                continue
+            if alt.cost < fit.cost:
+                fit = alt
+        return fit
+
+    def _orient(self, T_cam: np.ndarray, images, views, kp, score):
+        """Base↔tip choice: the swage band's colour, else the network's base keypoint."""
+        evidence = base_evidence(
+            images, tuple(views), (self.stereo.left, self.stereo.right), T_cam, self.model
+        )
+        if abs(evidence) >= MIN_EVIDENCE:
+            return (T_cam if evidence > 0 else swapped(T_cam, self.model)), evidence, "colour"
+        if score[0, 0] >= MIN_KEYPOINT_SCORE:
+            ends = project_cam(
+                self.stereo.left,
+                transform_points(T_cam, np.stack([self.model.base, self.model.tip])),
+            )
+            d = np.linalg.norm(ends - kp[0, 0], axis=1)
+            return (T_cam if d[0] <= d[1] else swapped(T_cam, self.model)), evidence, "keypoint"
+        return T_cam, evidence, "none"

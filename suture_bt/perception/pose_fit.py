@@ -95,8 +95,9 @@ class FreeSpaceTerm:
 def _bilinear(img: np.ndarray, u: np.ndarray, v: np.ndarray) -> np.ndarray:
     """Bilinear samples of img at (u, v); 0 outside."""
     h, w = img.shape
-    inside = (u >= 0) & (v >= 0) & (u <= w - 1) & (v <= h - 1)
-    uc, vc = np.clip(u, 0, w - 1.001), np.clip(v, 0, h - 1.001)
+    inside = (u >= 0) & (v >= 0) & (u <= w - 1) & (v <= h - 1)  # False for NaN too
+    uc = np.clip(np.nan_to_num(u), 0, w - 1.001)
+    vc = np.clip(np.nan_to_num(v), 0, h - 1.001)
     i0, j0 = vc.astype(int), uc.astype(int)
     fy, fx = vc - i0, uc - j0
     val = (

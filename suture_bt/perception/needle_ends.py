@@ -1,0 +1,108 @@
+"""Which end is the base: the violet swage band (where the suture is attached) against grey metal.
+
+The pose fit explains the needle's outline, which is the same for a pose and its base↔tip swap
+(a half turn about the arc's bisector). The base end carries a violet band, so the colour of
+the mask's pixels near each fitted end decides between the two: violet = (red + blue)/2 −
+green, relative to the pixel's level, is about 0.9 on the band and about 0 on the metal, at any
+brightness.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from suture_bt.geometry import NeedleModel
+from suture_bt.interfaces import CameraModel
+from suture_bt.perception.pose_fit import MaskView
+from suture_bt.transforms import invert
+
+#: Arc length around each end whose pixels are compared (m): inside the 3 mm band.
+END_ARC = 0.002
+#: Fewest mask pixels near an end for its colour to count.
+MIN_END_PIXELS = 3
+#: Violet score between grey metal (≈ 0) and the band (0.6-0.9 from dim to saturated light).
+VIOLET_THRESHOLD = 0.3
+#: |evidence| below this is undecided (the band is hidden or too small to see).
+MIN_EVIDENCE = 0.15
+
+
+def swap_rotation(model: NeedleModel) -> np.ndarray:
+    """The half turn (needle frame) about the arc's bisector that swaps base and tip."""
+    mid = 0.5 * (model.base_angle + model.tip_angle)
+    axis = np.array([np.cos(mid), np.sin(mid), 0.0])
+    return 2.0 * np.outer(axis, axis) - np.eye(3)
+
+
+def swapped(T_cam_needle: np.ndarray, model: NeedleModel) -> np.ndarray:
+    """The same outline with base and tip exchanged (the arc centre stays put)."""
+    T = np.array(T_cam_needle, dtype=float)
+    T[:3, :3] = T[:3, :3] @ swap_rotation(model)
+    return T
+
+
+def violet_score(rgb: np.ndarray) -> np.ndarray:
+    """Per pixel ((R + B)/2 − G) / level: ≈ 0.9 on the violet band, ≈ 0 on grey metal."""
+    c = rgb.astype(np.float32)
+    level = np.maximum(c.mean(-1), 1.0)
+    return (0.5 * (c[..., 0] + c[..., 2]) - c[..., 1]) / level
+
+
+def _end_score(
+    rgb: np.ndarray, view: MaskView, cam: CameraModel, T_cam_needle: np.ndarray, arcs: np.ndarray
+) -> float | None:
+    """Median violet score of the mask pixels nearest the projected arc samples; None if few."""
+    pts = arcs @ T_cam_needle[:3, :3].T + T_cam_needle[:3, 3]
+    if np.any(pts[:, 2] <= 0):
+        return None
+    uv = np.stack(
+        [cam.fx * pts[:, 0] / pts[:, 2] + cam.cx, cam.fy * pts[:, 1] / pts[:, 2] + cam.cy], 1
+    )
+    x0, y0 = view.origin
+    h, w = view.mask.shape
+    radius = max(2.0, 1.5 * cam.fx * 0.00036 / float(pts[:, 2].mean()))
+    lo = np.floor(uv.min(0) - radius).astype(int)
+    hi = np.ceil(uv.max(0) + radius).astype(int) + 1
+    a, b = max(lo[0] - x0, 0), min(hi[0] - x0, w)
+    c, d = max(lo[1] - y0, 0), min(hi[1] - y0, h)
+    if a >= b or c >= d:
+        return None
+    vv, uu = np.nonzero(view.mask[c:d, a:b])
+    if len(uu) == 0:
+        return None
+    pix = np.stack([uu + a + x0, vv + c + y0], 1).astype(float)
+    dist = np.min(np.linalg.norm(pix[:, None] - uv[None], axis=-1), 1)
+    near = dist <= radius
+    if near.sum() < MIN_END_PIXELS:
+        return None
+    sel = pix[near].astype(int)
+    return float(np.median(violet_score(rgb[sel[:, 1], sel[:, 0]])))
+
+
+def base_evidence(
+    images: tuple[np.ndarray, np.ndarray],
+    views: tuple[MaskView, MaskView],
+    cams: tuple[CameraModel, CameraModel],
+    T_cam_needle: np.ndarray,
+    model: NeedleModel,
+) -> float:
+    """Mean vote of the visible ends (both eyes): violet at the fitted base and grey at the
+    fitted tip vote > 0 (base and tip right), the opposite < 0 (swapped); 0 when none is seen.
+
+    ``T_cam_needle`` is in the first camera's frame; ``cams[1]`` is placed relative to it.
+    """
+    n = max(3, int(np.ceil(END_ARC / model.radius / 0.02)))
+    da = END_ARC / model.radius
+    base_arc = model.point_at(np.linspace(model.base_angle - da, model.base_angle, n))
+    tip_arc = model.point_at(np.linspace(model.tip_angle, model.tip_angle + da, n))
+    T_first_world = invert(cams[0].T_world_cam)
+    votes = []
+    for rgb, view, cam in zip(images, views, cams, strict=True):
+        T = invert(cam.T_world_cam) @ invert(T_first_world) @ T_cam_needle
+        sb = _end_score(rgb, view, cam, T, base_arc)
+        st = _end_score(rgb, view, cam, T, tip_arc)
+        # Each visible end votes: violet where the fit put the base, grey where it put the tip.
+        if sb is not None:
+            votes.append(sb - VIOLET_THRESHOLD)
+        if st is not None:
+            votes.append(VIOLET_THRESHOLD - st)
+    return float(np.mean(votes)) if votes else 0.0

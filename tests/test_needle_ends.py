@@ -1,0 +1,83 @@
+"""Base↔tip choice from the swage band's colour: right pose kept, swapped pose flagged."""
+
+import dataclasses
+
+import numpy as np
+from perception_helpers import stereo
+
+from suture_bt.geometry import NeedleModel
+from suture_bt.perception.needle_ends import (
+    MIN_EVIDENCE,
+    base_evidence,
+    swap_rotation,
+    swapped,
+    violet_score,
+)
+from suture_bt.perception.needle_projection import rasterize_needle
+from suture_bt.perception.pose_fit import MaskView
+from suture_bt.transforms import invert, make_transform
+
+MODEL = NeedleModel()
+BAND = dataclasses.replace(MODEL, tip_angle=MODEL.base_angle - 0.003 / MODEL.radius)
+PINK, GREY, VIOLET = (215, 140, 132), (158, 161, 168), (150, 60, 170)
+
+
+def _scene(T_left_needle: np.ndarray, band_colour=VIOLET):
+    """Images, masks and cameras of a synthetic needle with a coloured base band."""
+    st = stereo(960, 540)
+    images, views = [], []
+    for cam in (st.left, st.right):
+        T = invert(cam.T_world_cam) @ st.left.T_world_cam @ T_left_needle
+        full = rasterize_needle(cam, T, MODEL)
+        band = rasterize_needle(cam, T, BAND)
+        img = np.empty((540, 960, 3), np.uint8)
+        img[:] = PINK
+        img[full] = GREY
+        img[band] = band_colour
+        images.append(img)
+        views.append(MaskView(full))
+    return tuple(images), tuple(views), (st.left, st.right)
+
+
+def _pose() -> np.ndarray:
+    R = np.array([[1.0, 0, 0], [0, 0.6, -0.8], [0, 0.8, 0.6]])
+    return make_transform(R, (0.004, -0.002, 0.1))
+
+
+def test_swap_is_a_half_turn_that_exchanges_the_ends():
+    R = swap_rotation(MODEL)
+    assert np.allclose(R @ R, np.eye(3)) and np.isclose(np.linalg.det(R), 1.0)
+    assert np.allclose(R @ MODEL.base, MODEL.tip, atol=1e-12)
+    T = _pose()
+    Ts = swapped(T, MODEL)
+    assert np.allclose(Ts[:3, 3], T[:3, 3])
+    assert np.allclose(swapped(Ts, MODEL), T)
+
+
+def test_violet_band_scores_high_and_metal_near_zero():
+    s = violet_score(np.array([[VIOLET, GREY, (255, 120, 255), (255, 255, 255)]], np.uint8))[0]
+    assert s[0] > 0.6 and s[2] > 0.5
+    assert abs(s[1]) < 0.05 and abs(s[3]) < 0.01
+
+
+def test_band_colour_tells_the_right_pose_from_its_swap():
+    T = _pose()
+    images, views, cams = _scene(T)
+    right = base_evidence(images, views, cams, T, MODEL)
+    wrong = base_evidence(images, views, cams, swapped(T, MODEL), MODEL)
+    assert right > MIN_EVIDENCE
+    assert wrong < -MIN_EVIDENCE
+
+
+def test_no_band_leaves_the_choice_undecided_or_says_swapped():
+    T = _pose()
+    images, views, cams = _scene(T, band_colour=GREY)
+    # Both ends grey: the fitted base end votes "swapped", the tip end votes "right".
+    assert abs(base_evidence(images, views, cams, T, MODEL)) < MIN_EVIDENCE
+
+
+def test_needle_outside_the_masks_gives_zero_evidence():
+    T = _pose()
+    images, _, cams = _scene(T)
+    empty = (MaskView(np.zeros((540, 960), bool)),) * 2
+    assert base_evidence(images, empty, cams, T, MODEL) == 0.0

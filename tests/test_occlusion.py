@@ -1,0 +1,52 @@
+"""Occluded needle ends: flagged next to grey occluders or the border, pushed on behind them."""
+
+import numpy as np
+
+from suture_bt.perception.colour_refine import ColourRule
+from suture_bt.perception.occlusion import (
+    EXTENSIONS,
+    end_is_occluded,
+    extended_ends,
+    needle_coloured,
+)
+from suture_bt.perception.pose_fit import MaskView
+
+RULE = ColourRule()
+PINK, GREY, BLACK = (215, 140, 132), (158, 161, 168), (20, 10, 10)
+
+
+def _image_with_jaw():
+    """A horizontal wire from x=100 to x=200 at y=100; a grey jaw block just right of x=200."""
+    img = np.empty((200, 320, 3), np.uint8)
+    img[:] = PINK
+    mask = np.zeros((200, 320), bool)
+    mask[98:103, 100:201] = True
+    img[mask] = GREY
+    img[80:120, 203:240] = GREY  # the jaw: grey but not needle
+    return img, MaskView(mask[90:110, 90:210], (90, 90))
+
+
+def test_colour_test_passes_grey_metal_only():
+    px = np.array([[PINK, GREY, BLACK, (255, 255, 255)]], np.uint8)
+    assert needle_coloured(px, RULE)[0].tolist() == [False, True, False, True]
+
+
+def test_end_next_to_a_jaw_is_occluded_and_the_free_end_is_not():
+    img, view = _image_with_jaw()
+    assert end_is_occluded(img, view, np.array([200.0, 100.0]), 6.0, RULE)
+    assert not end_is_occluded(img, view, np.array([100.0, 100.0]), 6.0, RULE)
+
+
+def test_end_at_the_image_border_is_occluded():
+    img, view = _image_with_jaw()
+    assert end_is_occluded(img, view, np.array([2.0, 100.0]), 6.0, RULE)
+
+
+def test_only_occluded_ends_are_extended_along_the_chord():
+    a, b = np.array([100.0, 100.0]), np.array([200.0, 100.0])
+    hyps = extended_ends((a, b), (False, True))
+    assert len(hyps) == len(EXTENSIONS)
+    for (ha, hb), k in zip(hyps, EXTENSIONS, strict=True):
+        assert np.allclose(ha, a) and np.allclose(hb, b + k * (b - a))
+    assert extended_ends((a, b), (False, False)) == []
+    assert len(extended_ends((a, b), (True, True))) == 2 * len(EXTENSIONS)
