@@ -279,6 +279,25 @@ def _labels(cam: CameraModel, T_world_needle, model: NeedleModel, mask: np.ndarr
     return (ends + 0.5) * scale - 0.5, np.array(vis)
 
 
+#: Share of scenes kept although the needle is hidden in the left image (negative examples).
+HIDDEN_SHARE = 0.05
+#: Fewest needle pixels (render size) for the left image to count as showing the needle.
+MIN_VISIBLE_PX = 30
+
+
+def _visible_scene(sim: SimScene, rng: np.random.Generator, tries: int = 20):
+    """A sampled scene whose needle shows in the left image (the sampler's geometric checks
+    miss the block hiding a needle beside it), with that image: (sample, (rgb, mask)).
+    A few hidden-needle scenes are kept on purpose as negatives."""
+    for _ in range(tries):
+        s = sim.sampler.sample(rng)
+        sim.apply(s)
+        rgb, mask = sim.render("left", s, rng)
+        if mask.sum() >= MIN_VISIBLE_PX or rng.random() < HIDDEN_SHARE:
+            break
+    return s, (rgb, mask)
+
+
 def generate(
     n: int, out: Path, seed: int = 0, shard_size: int = 200, progress: bool = True
 ) -> dict:
@@ -309,10 +328,9 @@ def generate(
     try:
         for i in tqdm(range(n), desc="needle data", disable=not progress):
             rng = np.random.default_rng([seed, i])
-            s = sim.sampler.sample(rng)
-            sim.apply(s)
+            s, first = _visible_scene(sim, rng)
             for eye, cam in (("left", sim.stereo.left), ("right", sim.stereo.right)):
-                rgb, mask = sim.render(eye, s, rng)
+                rgb, mask = first if eye == "left" else sim.render(eye, s, rng)
                 kp, vis = _labels(cam, s.T_world_needle, sim.model, mask, scale)
                 buf["images"].append(_downsample(rgb, (net_w, net_h)))
                 cov = _downsample(mask.astype(np.float32), (net_w, net_h))
