@@ -54,19 +54,22 @@ def test_shipped_network_localizes_a_rendered_needle():
 
     sim = SimScene(960, 540)
     try:
-        for i in range(20):  # the first seeded scene whose needle is in full view
+        for i in range(40):  # the first seeded scene whose needle is in full view
             rng = np.random.default_rng([2024, i])
             s = sim.sampler.sample(rng, scenario="free", zr=(0.08, 0.12))
             s = s.__class__(s.scenario, s.T_world_needle, s.q, s.jaw, 1.0, 2.0)
             sim.apply(s)
             left, mask = sim.render("left", s, rng)
-            if mask.sum() > 400:
+            if mask.sum() > 300:
                 break
+        else:
+            pytest.fail("no seeded scene shows the needle")
         right, _ = sim.render("right", s, rng)
         est = NeedleLocalizer(sim.stereo).localize(left, right)
         T_true = invert(sim.stereo.left.T_world_cam) @ s.T_world_needle
     finally:
         sim.close()
     pos, ang = pose_errors(est.T_cam_needle, T_true)
-    assert pos < 2.0 and min(ang, 180 - ang) < 5.0
+    assert pos < 2.0 and ang < 5.0  # base and tip told apart (the swage band's colour)
+    assert est.end_decided_by == "colour"
     assert est.timings_ms["total"] > 0
