@@ -109,3 +109,30 @@ def test_free_space_term_is_zero_at_the_true_pose_and_positive_off_it():
     r = term(np.stack([T, moved]))
     # Off the true pose part of the arc leaves the crop (no evidence there: residual 0).
     assert np.mean(r[0] > 0.5) < 0.2 and np.mean(r[1] > 0.5) > 0.3
+
+
+def test_alternative_end_hypothesis_rescues_wrong_keypoints():
+    st = stereo(1920, 1080)
+    rng = np.random.default_rng(3)
+    T = random_needle_pose(rng, 0.08, 0.12)
+    left, right = _views(st, T)
+    true_ends = _ends(st.left, T, rng, 1.0)
+    # Both keypoints far off the needle (e.g. on a jaw): alone they lead the fit astray.
+    wrong = tuple(true_ends + np.array([[120.0, -90.0], [150.0, -60.0]]))
+    res = PoseFitter(st, MODEL).fit(left, right, wrong, alternatives=[tuple(true_ends)])
+    pos, ang = pose_errors(res.T_cam_needle, T)
+    assert pos < 0.5 and ang < 1.5
+
+
+def test_mask_ends_are_the_visible_arcs_extremes():
+    from suture_bt.perception.pose_fit import mask_ends
+
+    st = stereo(1920, 1080)
+    T = random_needle_pose(np.random.default_rng(4), 0.08, 0.12)
+    left, _ = _views(st, T)
+    ends = np.array(mask_ends(left))
+    truth = _ends(st.left, T, np.random.default_rng(0), 0.0)
+    d = min(np.abs(ends - truth).max(), np.abs(ends[::-1] - truth).max())
+    assert d < 12.0  # within the wire's cap and the edge sampling
+    with pytest.raises(NeedleNotFound):
+        mask_ends(MaskView(np.zeros((10, 10), bool)))

@@ -38,7 +38,13 @@ from suture_bt.perception.network import (
     load_network,
 )
 from suture_bt.perception.occlusion import end_is_occluded, extended_ends
-from suture_bt.perception.pose_fit import MaskView, NeedleNotFound, PoseFitResult, PoseFitter
+from suture_bt.perception.pose_fit import (
+    MaskView,
+    NeedleNotFound,
+    PoseFitResult,
+    PoseFitter,
+    mask_ends,
+)
 
 #: A keypoint heatmap peak below this probability is not trusted (the mask's ends are used).
 MIN_KEYPOINT_SCORE = 0.15
@@ -194,8 +200,7 @@ class NeedleLocalizer:
                 view = MaskView(view.mask, view.origin, dt, org)
             views.append(view)
         t2 = time.perf_counter()
-        fit = self._fit(views, ends, depth, previous)
-        fit = self._fit_behind_occluders(fit, left, views, half_width, previous)
+        fit = self._fit(left, views, ends, depth, half_width, previous)
         t3 = time.perf_counter()
         T_cam, evidence, decided_by = self._orient(
             fit.T_cam_needle, (left, right), views, kp, score
@@ -222,50 +227,42 @@ class NeedleLocalizer:
             masks=(views[0], views[1]),
         )
 
-    def _fit(self, views, ends, depth, previous) -> PoseFitResult:
-        """Fit from the keypoints (and depth hint); a failed or poor fit is retried.
+    def _fit(self, left, views, ends, depth, half_width, previous) -> PoseFitResult:
+        """Fit from the keypoints (and depth hint), plus end hypotheses behind occluders.
 
-        A poor fit often means a keypoint landed off the needle (e.g. on a jaw) or the
-        disparity depth was wrong: refit without the depth hint, from the keypoints and from
-        the mask's own ends, and keep whichever explains the edges best.
+        An end of the visible needle that touches a grey occluder (or the border) may continue
+        behind it (:mod:`occlusion`): pushed-out ends join the fit as alternatives. A poor or
+        failed fit often means a keypoint landed off the needle (e.g. on a jaw) or the disparity
+        depth was wrong: it is refit without the depth hint, from the keypoints and from the
+        mask's own ends, and whichever explains the edges best is kept.
         """
+        visible_ends = ends if ends is not None else mask_ends(views[0])
+        radius = 2.0 * half_width + 3.0
+        occluded = tuple(
+            end_is_occluded(left, views[0], e, radius, self.rule) for e in visible_ends
+        )
+        behind = extended_ends(visible_ends, occluded)
+        self.last_occluded_ends = occluded
         fit = None
         try:
-            fit = self.fitter.fit(views[0], views[1], ends, depth_hint=depth, warm_start=previous)
+            fit = self.fitter.fit(
+                views[0], views[1], ends, depth_hint=depth, warm_start=previous, alternatives=behind
+            )
         except NeedleNotFound:
             if ends is None and depth is None:
                 raise
         if fit is None or fit.rms_px > RETRY_RMS_PX or fit.inlier_fraction < RETRY_INLIERS:
-            for alt_ends in (ends, None) if ends is not None else (None,):
-                try:
-                    alt = self.fitter.fit(views[0], views[1], alt_ends, warm_start=previous)
-                except NeedleNotFound:
-                    continue
+            retry = [None] + behind if ends is not None else behind
+            try:
+                alt = self.fitter.fit(
+                    views[0], views[1], ends, warm_start=previous, alternatives=retry
+                )
                 if fit is None or alt.cost < fit.cost:
                     fit = alt
+            except NeedleNotFound:
+                pass
         if fit is None:
             raise NeedleNotFound("no pose explains the needle's outline (every start failed)")
-        return fit
-
-    def _fit_behind_occluders(
-        self, fit: PoseFitResult, left: np.ndarray, views, half_width: float, previous
-    ) -> PoseFitResult:
-        """Refit with a visible end that touches an occluder pushed on behind it (see
-        :mod:`occlusion`); keep whichever fit explains the edges best."""
-        ends = project_cam(
-            self.stereo.left,
-            transform_points(fit.T_cam_needle, np.stack([self.model.base, self.model.tip])),
-        )
-        radius = 2.0 * half_width + 3.0
-        occluded = tuple(end_is_occluded(left, views[0], e, radius, self.rule) for e in ends)
-        self.last_occluded_ends = occluded
-        for hyp in extended_ends((ends[0], ends[1]), occluded):
-            try:
-                alt = self.fitter.fit(views[0], views[1], hyp, warm_start=previous)
-            except NeedleNotFound:
-                continue
-            if alt.cost < fit.cost:
-                fit = alt
         return fit
 
     def _orient(self, T_cam: np.ndarray, images, views, kp, score):

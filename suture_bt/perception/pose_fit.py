@@ -13,6 +13,7 @@ tilt-mirror ambiguity), on the parameters of :mod:`needle_projection`.
 
 from __future__ import annotations
 
+from collections.abc import Sequence
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -348,6 +349,7 @@ class PoseFitter:
     coarse_points_per_eye: int = 60
     mid_points_per_eye: int = 200
     n_keep: int = 6
+    n_keep_alternative: int = 3
     min_edge_points: int = 12
     seed: int = 0
     #: LM iterations: all kept starts (σ = 3 px, then 1 px) on a subsample, then the best two
@@ -361,8 +363,15 @@ class PoseFitter:
         endpoints_left: tuple[np.ndarray, np.ndarray] | None = None,
         depth_hint: float | None = None,
         warm_start: np.ndarray | None = None,
+        alternatives: Sequence[tuple[np.ndarray, np.ndarray] | None] = (),
     ) -> PoseFitResult:
-        """Fit; ``endpoints_left`` = (base uv, tip uv) in the left image; raise NeedleNotFound."""
+        """Fit; ``endpoints_left`` = (base uv, tip uv) in the left image; raise NeedleNotFound.
+
+        ``alternatives`` are further end-pixel hypotheses (``None``: the mask's own farthest
+        pair), searched over all depths; the best ``n_keep_alternative`` starts of each join
+        the main hypothesis' in one batched fit, so a wrong keypoint or a hidden end costs one
+        fit, not several.
+        """
         rng = np.random.default_rng(self.seed)
         el, er = edge_points(left), edge_points(right)
         if len(el) < self.min_edge_points or len(er) < self.min_edge_points:
@@ -382,28 +391,31 @@ class PoseFitter:
                 np.asarray(warm_start), np.stack([self.model.base, self.model.tip])
             )
             endpoints_left = tuple(project_cam(cam, ends))
-        elif endpoints_left is None:
-            endpoints_left = _farthest_pair(el, rng)
-        ub, ut = (np.asarray(e, float) for e in endpoints_left)
-        starts = self._starts(ub, ut, depth_hint)
-        if warm_start is not None:
-            starts = np.concatenate(
-                [starts, pose_to_params(np.asarray(warm_start)[None], cam, self.model)]
-            )
         free = FreeSpaceTerm(self.stereo, self.model, (left, right)) or None
-        T0 = params_to_pose(starts, cam, self.model)
-        r0, _ = residuals(T0, coarse, self.model, grid=12)
-        if free:
-            r0 = np.concatenate([r0, free(T0)], 1)
-        c0 = cauchy_cost(r0, 3.0)
-        order = np.argsort(c0)[: self.n_keep * 3]
-        keep = [i for i in order if np.isfinite(c0[i])][: self.n_keep]
-        if warm_start is not None and len(starts) - 1 not in keep:
-            keep.append(len(starts) - 1)
-        if not keep:
+
+        def best_starts(ends, hint, n: int) -> np.ndarray:
+            """The n lowest-cost feasible starts (coarse edge subset) for one end hypothesis."""
+            if ends is None:
+                ends = _farthest_pair(el, rng)
+            ub, ut = (np.asarray(e, float) for e in ends)
+            st = self._starts(ub, ut, hint)
+            T0 = params_to_pose(st, cam, self.model)
+            r0, _ = residuals(T0, coarse, self.model, grid=12)
+            if free:
+                r0 = np.concatenate([r0, free(T0)], 1)
+            c0 = cauchy_cost(r0, 3.0)
+            order = np.argsort(c0)[:n]
+            return st[[i for i in order if np.isfinite(c0[i])]]
+
+        parts = [best_starts(endpoints_left, depth_hint, self.n_keep)]
+        parts += [best_starts(e, None, self.n_keep_alternative) for e in alternatives]
+        if warm_start is not None:
+            parts.append(pose_to_params(np.asarray(warm_start)[None], cam, self.model))
+        starts = np.concatenate(parts)
+        if not len(starts):
             raise NeedleNotFound("no feasible pose hypothesis from the needle's end points")
         it1, it2, it3 = self.iterations
-        x, _ = levenberg_marquardt(starts[keep], mid, self.stereo, self.model, it1, 3.0, free)
+        x, _ = levenberg_marquardt(starts, mid, self.stereo, self.model, it1, 3.0, free)
         x, c = levenberg_marquardt(x, mid, self.stereo, self.model, it2, 1.0, free)
         order = np.argsort(c)
         T_mid = params_to_pose(x[order], cam, self.model)
@@ -475,6 +487,14 @@ def _balanced(nl: int, nr: int, n: int, rng: np.random.Generator) -> np.ndarray:
     a = np.sort(rng.choice(nl, min(n, nl), replace=False))
     b = nl + np.sort(rng.choice(nr, min(n, nr), replace=False))
     return np.concatenate([a, b])
+
+
+def mask_ends(view: MaskView, seed: int = 0) -> tuple[np.ndarray, np.ndarray]:
+    """The mask's two mutually farthest edge points (full-image px): the visible arc's ends."""
+    pts = edge_points(view)
+    if len(pts) < 2:
+        raise NeedleNotFound("the needle mask has no ends (fewer than two edge points)")
+    return _farthest_pair(pts, np.random.default_rng(seed))
 
 
 def _farthest_pair(pts: np.ndarray, rng: np.random.Generator) -> tuple[np.ndarray, np.ndarray]:
