@@ -7,27 +7,12 @@ on stderr and a non-zero exit status, never a traceback.
 from __future__ import annotations
 
 import argparse
-import os
 import sys
 from collections.abc import Sequence
 
+from suture_bt.sim.quiet import import_pybullet_quietly  # noqa: E402
 
-def _import_pybullet_quietly() -> None:
-    """Import pybullet with its build-time banner (written to fd 2) suppressed."""
-    if "pybullet" in sys.modules:
-        return
-    sys.stderr.flush()
-    saved, devnull = os.dup(2), os.open(os.devnull, os.O_WRONLY)
-    try:
-        os.dup2(devnull, 2)
-        import pybullet  # noqa: F401
-    finally:
-        os.dup2(saved, 2)
-        os.close(saved)
-        os.close(devnull)
-
-
-_import_pybullet_quietly()
+import_pybullet_quietly()  # before the commands import the simulator
 
 from suture_bt.commands import data as data_command  # noqa: E402
 from suture_bt.commands import run as run_command  # noqa: E402
