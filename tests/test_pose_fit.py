@@ -28,6 +28,15 @@ def _views(st, T):
     return views
 
 
+def _scene_1080p(seed: int, noise_px: float):
+    """Stereo model, a pose 80-120 mm away, its two exact masks and noisy left end pixels."""
+    st = stereo(1920, 1080)
+    rng = np.random.default_rng(seed)
+    T = random_needle_pose(rng, 0.08, 0.12)
+    left, right = _views(st, T)
+    return st, T, left, right, _ends(st.left, T, rng, noise_px)
+
+
 def _ends(cam, T, rng, noise_px):
     e = project_cam(cam, transform_points(T, np.stack([MODEL.base, MODEL.tip])))
     return e + rng.normal(0, noise_px, e.shape)
@@ -55,11 +64,7 @@ def test_fit_recovers_known_pose_at_1080p(seed):
 
 
 def test_fit_tolerates_occlusion_of_a_third_of_the_needle():
-    st = stereo(1920, 1080)
-    rng = np.random.default_rng(7)
-    T = random_needle_pose(rng, 0.08, 0.12)
-    left, right = _views(st, T)
-    ends = _ends(st.left, T, rng, 2.0)
+    st, T, left, right, ends = _scene_1080p(7, 2.0)
     occluded = []
     for v, e in zip((left, right), (ends, ends), strict=True):
         m = v.mask.copy()
@@ -112,11 +117,7 @@ def test_free_space_term_is_zero_at_the_true_pose_and_positive_off_it():
 
 
 def test_alternative_end_hypothesis_rescues_wrong_keypoints():
-    st = stereo(1920, 1080)
-    rng = np.random.default_rng(3)
-    T = random_needle_pose(rng, 0.08, 0.12)
-    left, right = _views(st, T)
-    true_ends = _ends(st.left, T, rng, 1.0)
+    st, T, left, right, true_ends = _scene_1080p(3, 1.0)
     # Both keypoints far off the needle (e.g. on a jaw): alone they lead the fit astray.
     wrong = tuple(true_ends + np.array([[120.0, -90.0], [150.0, -60.0]]))
     res = PoseFitter(st, MODEL).fit(left, right, wrong, alternatives=[tuple(true_ends)])
