@@ -3,11 +3,14 @@
 import numpy as np
 import pytest
 import torch
+from weights_helpers import Evil, assert_refused
 
 from suture_bt.calibration.keypoint_net import (
     INPUT_SIZE,
     PATCH,
+    WEIGHTS_PATH,
     FineNet,
+    KeypointDetector,
     KeypointNet,
     box_average,
     coarse_to_window,
@@ -90,3 +93,51 @@ def test_networks_output_shapes_and_input_normalisation():
     with torch.no_grad():
         assert KeypointNet()(t).shape == (2, 4, 32, 32)
         assert FineNet()(to_input(x[:, :PATCH, :PATCH])).shape == (2, 4, PATCH, PATCH)
+
+
+def _detector(seed: int = 0) -> KeypointDetector:
+    torch.manual_seed(seed)
+    meta = {"coarse_width": 4, "fine_width": 4, "validation_px": np.array([0.5, 0.25])}
+    return KeypointDetector(KeypointNet(4).eval(), FineNet(4).eval(), meta)
+
+
+def test_save_load_round_trip_keeps_detections_and_plain_meta(tmp_path):
+    det = _detector()
+    path = tmp_path / "kp.pt"
+    det.save(path)
+    back = KeypointDetector.load(path)
+    assert back.meta["validation_px"] == [0.5, 0.25] and back.coarse.stem[0][0].out_channels == 4
+    w = np.random.default_rng(3).integers(0, 255, (2, INPUT_SIZE, INPUT_SIZE, 3), dtype=np.uint8)
+    kp0, c0 = det.detect_in_windows(w)
+    kp1, c1 = back.detect_in_windows(w)
+    np.testing.assert_array_equal(kp0, kp1)
+    np.testing.assert_array_equal(c0, c1)
+
+
+def test_shipped_weights_load_data_only():
+    det = KeypointDetector.load()
+    assert det.meta["coarse_width"] == 8 and len(det.meta["validation_px"]["mean"]) == 4
+    blob = torch.load(WEIGHTS_PATH, map_location="cpu", weights_only=True)
+    assert blob["format"] == "suture_bt.keypoint_net.v1"
+
+
+def test_bad_weights_files_raise_one_line_errors(tmp_path):
+    marker = tmp_path / "ran"
+    evil = tmp_path / "evil.pt"
+    torch.save({"format": "suture_bt.keypoint_net.v1", "state": Evil(marker), "meta": {}}, evil)
+    text = tmp_path / "text.pt"
+    text.write_text("hello\n")
+    other = tmp_path / "other.pt"
+    torch.save({"state": {}, "meta": {}}, other)  # the old untagged layout
+    wrong = tmp_path / "wrong.pt"
+    _detector().save(wrong)
+    blob = torch.load(wrong, weights_only=True)
+    blob["meta"]["fine_width"] = 6
+    torch.save(blob, wrong)
+    cases = {evil: "refused", text: "not a readable", other: "not a suture_bt.keypoint_net.v1"}
+    cases[wrong] = "do not match FineNet"
+    for path, reason in cases.items():
+        assert_refused(KeypointDetector.load, path, reason, "suture-bt train calibration")
+    assert not marker.exists()
+    with pytest.raises(FileNotFoundError, match="suture-bt train calibration"):
+        KeypointDetector.load(tmp_path / "missing.pt")

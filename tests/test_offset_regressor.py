@@ -3,17 +3,20 @@
 import numpy as np
 import pytest
 import torch
+from weights_helpers import Evil, assert_refused
 
 from suture_bt.calibration.calibration_pose import CALIBRATION_POSES
 from suture_bt.calibration.offset_regressor import (
     HIDDEN,
     NUM_INPUTS,
+    WEIGHTS_PATH,
     OffsetMLP,
     OffsetRegressor,
     new_regressor,
     regressor_features,
     to_reference_pixels,
 )
+from suture_bt.weights_file import WeightsError
 
 
 def test_architecture_is_400_300_200_relu():
@@ -64,9 +67,51 @@ def test_save_load_round_trip_and_pose_guard(tmp_path):
     np.testing.assert_allclose(
         back.predict("psm1", x, 1920, 1080, q), reg.predict("psm1", x, 1920, 1080, q)
     )
-    reg.meta["poses"]["psm1"] = [0.0] * 6
+    reg.meta["poses"]["psm1"] = np.zeros(6)  # numpy in meta is stored as a plain list
     reg.save(path)
-    with pytest.raises(ValueError, match="another calibration pose"):
+    with pytest.raises(WeightsError, match="another calibration pose of psm1"):
+        OffsetRegressor.load(path)
+    reg.meta["poses"]["psm1"] = CALIBRATION_POSES["psm1"]
+    reg.meta["jaw"] = np.float64(0.5)
+    reg.save(path)
+    with pytest.raises(WeightsError, match="jaw angle 0.5"):
         OffsetRegressor.load(path)
     with pytest.raises(FileNotFoundError, match="suture-bt train calibration"):
         OffsetRegressor.load(tmp_path / "missing.pt")
+
+
+def test_shipped_weights_load_data_only():
+    reg = OffsetRegressor.load()
+    assert sorted(reg.models) == ["psm1", "psm2"] and reg.meta["reference_size"] == [1920, 1080]
+    blob = torch.load(WEIGHTS_PATH, map_location="cpu", weights_only=True)
+    assert blob["format"] == "suture_bt.offset_regressor.v1"
+
+
+def test_bad_weights_files_raise_one_line_errors(tmp_path):
+    marker = tmp_path / "ran"
+    evil = tmp_path / "evil.pt"
+    torch.save({"format": "suture_bt.offset_regressor.v1", "state": {}, "meta": Evil(marker)}, evil)
+    cut = tmp_path / "cut.pt"
+    cut.write_bytes(WEIGHTS_PATH.read_bytes()[:5000])
+    detector = tmp_path / "detector.pt"
+    detector.write_bytes(WEIGHTS_PATH.with_name("keypoint_net.pt").read_bytes())
+    good = tmp_path / "good.pt"
+    new_regressor().save(good)
+    blob = torch.load(good, weights_only=True)
+    arms = tmp_path / "arms.pt"
+    torch.save(blob | {"state": {"psm3": blob["state"]["psm1"]}}, arms)
+    nopose = tmp_path / "nopose.pt"
+    torch.save(blob | {"meta": {"jaw": 0.8}}, nopose)
+    shapes = tmp_path / "shapes.pt"
+    torch.save(blob | {"state": blob["state"] | {"psm2": {"x": torch.zeros(1)}}}, shapes)
+    cases = {
+        evil: "refused",
+        cut: "not a readable",
+        detector: "format 'suture_bt.keypoint_net.v1'",
+        arms: "arms",
+        nopose: "poses/jaw",
+        shapes: "do not match OffsetMLP",
+    }
+    for path, reason in cases.items():
+        assert_refused(OffsetRegressor.load, path, reason, "suture-bt train calibration")
+    assert not marker.exists()

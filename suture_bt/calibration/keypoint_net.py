@@ -20,6 +20,7 @@ from torch import nn
 
 from suture_bt.calibration.jaw_keypoints import NUM_KEYPOINTS
 from suture_bt.interfaces import CameraModel
+from suture_bt.weights_file import WeightsError, load_state, load_weights_file, save_weights_file
 
 #: Network input side (px) and the image scale it sees relative to the SRC 1920×1080 camera.
 INPUT_SIZE = 256
@@ -35,6 +36,8 @@ KEYPOINT_SIGMA_PX = (1.0, 0.9, 0.6, 0.6)
 COARSE_WIDTH = 8
 FINE_WIDTH = 12
 WEIGHTS_PATH = Path(__file__).resolve().parent / "weights" / "keypoint_net.pt"
+WEIGHTS_FORMAT = "suture_bt.keypoint_net.v1"
+WEIGHTS_HINT = "run `suture-bt train calibration` to produce it (see README)"
 
 
 def _conv(cin: int, cout: int, stride: int = 1) -> nn.Sequential:
@@ -286,20 +289,21 @@ class KeypointDetector:
         return win.to_image(kp[0]), conf[0], win
 
     def save(self, path: Path = WEIGHTS_PATH) -> None:
-        path.parent.mkdir(parents=True, exist_ok=True)
-        blob = {"coarse": self.coarse.state_dict(), "fine": self.fine.state_dict()}
-        torch.save({"state": blob, "meta": self.meta}, path)
+        """Write both stages' weights and the (plain-typed) meta as a data-only file."""
+        state = {"coarse": self.coarse.state_dict(), "fine": self.fine.state_dict()}
+        save_weights_file(path, WEIGHTS_FORMAT, state, self.meta)
 
     @classmethod
     def load(cls, path: Path = WEIGHTS_PATH) -> KeypointDetector:
-        if not Path(path).exists():
-            raise FileNotFoundError(
-                f"{path} not found: run `suture-bt train calibration` to produce it"
-            )
-        blob = torch.load(path, map_location="cpu", weights_only=False)
-        meta = blob["meta"]
-        coarse = KeypointNet(meta.get("coarse_width", COARSE_WIDTH))
-        fine = FineNet(meta.get("fine_width", FINE_WIDTH))
-        coarse.load_state_dict(blob["state"]["coarse"])
-        fine.load_state_dict(blob["state"]["fine"])
+        """Load weights (data only, ``weights_only=True``); a bad file raises WeightsError."""
+        state, meta = load_weights_file(path, WEIGHTS_FORMAT, WEIGHTS_HINT)
+        try:
+            coarse = KeypointNet(int(meta.get("coarse_width", COARSE_WIDTH)))
+            fine = FineNet(int(meta.get("fine_width", FINE_WIDTH)))
+        except (TypeError, ValueError) as exc:
+            raise WeightsError(
+                f"{path}: bad network widths in meta ({exc}); {WEIGHTS_HINT}"
+            ) from None
+        load_state(coarse, state.get("coarse"), path, WEIGHTS_HINT)
+        load_state(fine, state.get("fine"), path, WEIGHTS_HINT)
         return cls(coarse.eval(), fine.eval(), meta)

@@ -18,11 +18,14 @@ from torch import nn
 from suture_bt.calibration.calibration_pose import CALIBRATION_JAW, CALIBRATION_POSES
 from suture_bt.calibration.jaw_keypoints import NUM_KEYPOINTS
 from suture_bt.calibration.scene_geometry import ARM_NAMES, REFERENCE_SIZE
+from suture_bt.weights_file import WeightsError, load_state, load_weights_file, save_weights_file
 
 HIDDEN = (400, 300, 200)
 NUM_INPUTS = 2 * NUM_KEYPOINTS + 6
 NUM_OUTPUTS = 3
 WEIGHTS_PATH = Path(__file__).resolve().parent / "weights" / "offset_regressor.pt"
+WEIGHTS_FORMAT = "suture_bt.offset_regressor.v1"
+WEIGHTS_HINT = "run `suture-bt train calibration` to produce it (see README)"
 
 
 def to_reference_pixels(pixels: np.ndarray, width: int, height: int) -> np.ndarray:
@@ -102,30 +105,37 @@ class OffsetRegressor:
         return self.models[arm].predict(regressor_features(arm, ref, q_meas))
 
     def save(self, path: Path = WEIGHTS_PATH) -> None:
-        path.parent.mkdir(parents=True, exist_ok=True)
+        """Write both arms' weights and the (plain-typed) meta as a data-only file."""
         state = {arm: m.state_dict() for arm, m in self.models.items()}
-        torch.save({"state": state, "meta": self.meta}, path)
+        save_weights_file(path, WEIGHTS_FORMAT, state, self.meta)
 
     @classmethod
     def load(cls, path: Path = WEIGHTS_PATH) -> OffsetRegressor:
-        """Load shipped weights; refuses weights trained for another pose or jaw angle."""
-        if not Path(path).exists():
-            raise FileNotFoundError(
-                f"{path} not found: run `suture-bt train calibration` to produce it"
+        """Load weights (data only, ``weights_only=True``); refuses a bad file and weights
+        trained for another pose or jaw angle (WeightsError)."""
+        state, meta = load_weights_file(path, WEIGHTS_FORMAT, WEIGHTS_HINT)
+        if not state or not set(state) <= set(CALIBRATION_POSES):
+            raise WeightsError(f"{path}: arms {sorted(state)} are not {ARM_NAMES}; {WEIGHTS_HINT}")
+        try:
+            poses, jaw = meta["poses"], float(meta["jaw"])
+            wrong = [a for a in state if not np.allclose(poses[a], CALIBRATION_POSES[a])]
+        except (KeyError, TypeError, ValueError) as exc:
+            raise WeightsError(
+                f"{path}: meta lacks valid poses/jaw ({exc!r}); {WEIGHTS_HINT}"
+            ) from None
+        if wrong:
+            raise WeightsError(
+                f"{path}: trained for another calibration pose of {wrong[0]}; {WEIGHTS_HINT}"
             )
-        blob = torch.load(path, map_location="cpu", weights_only=False)
-        meta = blob["meta"]
-        for arm in blob["state"]:
-            if not np.allclose(meta["poses"][arm], CALIBRATION_POSES[arm]):
-                raise ValueError(f"{path}: trained for another calibration pose of {arm}")
-        if abs(meta["jaw"] - CALIBRATION_JAW) > 1e-9:
-            raise ValueError(f"{path}: trained for jaw angle {meta['jaw']}, not {CALIBRATION_JAW}")
+        if abs(jaw - CALIBRATION_JAW) > 1e-9:
+            raise WeightsError(
+                f"{path}: trained for jaw angle {jaw}, not {CALIBRATION_JAW}; {WEIGHTS_HINT}"
+            )
         models = {}
-        for arm, sd in blob["state"].items():
+        for arm, sd in state.items():
             m = OffsetMLP()
-            m.load_state_dict(sd)
-            m.eval()
-            models[arm] = m
+            load_state(m, sd, path, WEIGHTS_HINT)
+            models[arm] = m.eval()
         return cls(models, meta)
 
 
