@@ -1,7 +1,7 @@
 """``suture-bt data TARGET --n N --out DIR [--seed S]``: render a training dataset.
 
-Targets live in :data:`TARGETS` (name → generator callable ``fn(n, out, seed) -> meta dict``);
-adding one is a one-line edit.
+Targets live in :data:`TARGETS` (name → generator ``fn(n, out, seed) -> meta dict``), each
+registered by ``@target(name)`` on its function.
 """
 
 from __future__ import annotations
@@ -9,33 +9,32 @@ from __future__ import annotations
 import json
 from pathlib import Path
 
+from suture_bt.commands.targets import add_target_command, target_registry
 
+#: Dataset generators by target name (``@target(name)`` registers one).
+TARGETS, target = target_registry()
+
+
+@target("needle")
 def _needle(n: int, out: Path, seed: int) -> dict:
     from suture_bt.datagen.needle_data import generate
 
     return generate(n, out, seed)
 
 
+@target("calibration")
 def _calibration(n: int, out: Path, seed: int) -> dict:
     from suture_bt.datagen.calibration_data import generate
 
     return generate(n, out, seed)
 
 
-#: Dataset generators by target name.
-TARGETS = {
-    "needle": _needle,
-    "calibration": _calibration,
-}
-
-
 def register(subparsers) -> None:
-    p = subparsers.add_parser("data", help="render a simulated training dataset")
-    p.add_argument("target", choices=sorted(TARGETS), help="which dataset")
+    summary = "render a simulated training dataset"
+    p = add_target_command(subparsers, "data", summary, TARGETS, "which dataset", run)
     p.add_argument("--n", type=int, required=True, help="number of scenes")
     p.add_argument("--out", required=True, metavar="DIR", help="output folder")
     p.add_argument("--seed", type=int, default=0, help="random seed (default 0)")
-    p.set_defaults(func=run)
 
 
 def run(args) -> int:

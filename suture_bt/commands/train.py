@@ -1,7 +1,7 @@
 """``suture-bt train TARGET [--data DIR] [--out PATH]``: train a network from a dataset folder.
 
-Targets live in :data:`TARGETS` (name → ``fn(args) -> result dict``); adding one is a
-one-line edit.
+Targets live in :data:`TARGETS` (name → ``fn(args) -> result dict``), each registered by
+``@target(name)`` on its function.
 """
 
 from __future__ import annotations
@@ -9,9 +9,15 @@ from __future__ import annotations
 import json
 from pathlib import Path
 
+from suture_bt.commands.targets import add_target_command, target_registry
+
+#: Trainers by target name (``@target(name)`` registers one).
+TARGETS, target = target_registry()
+
 DEFAULT_DATA = {"needle": "data/needle", "calibration": "data/calibration"}
 
 
+@target("needle")
 def _needle(args) -> dict:
     from suture_bt.perception.network import DEFAULT_WEIGHTS
     from suture_bt.perception.training import TrainConfig, train
@@ -25,6 +31,7 @@ def _needle(args) -> dict:
     return train(Path(args.data or DEFAULT_DATA["needle"]), out, cfg) | {"weights": str(out)}
 
 
+@target("calibration")
 def _calibration(args) -> dict:
     from suture_bt.calibration.training import train_calibration
 
@@ -32,22 +39,14 @@ def _calibration(args) -> dict:
     return train_calibration(data, args.out, seed=args.seed, steps=args.steps, minutes=args.minutes)
 
 
-#: Trainers by target name.
-TARGETS = {
-    "needle": _needle,
-    "calibration": _calibration,
-}
-
-
 def register(subparsers) -> None:
-    p = subparsers.add_parser("train", help="train a network on a simulated dataset")
-    p.add_argument("target", choices=sorted(TARGETS), help="which network")
+    summary = "train a network on a simulated dataset"
+    p = add_target_command(subparsers, "train", summary, TARGETS, "which network", run)
     p.add_argument("--data", metavar="DIR", help="dataset folder (default: data/<target>)")
     p.add_argument("--out", metavar="PATH", help="weights file (default: the packaged weights)")
     p.add_argument("--seed", type=int, default=0, help="random seed (default 0)")
     p.add_argument("--steps", type=int, help="maximum number of updates")
     p.add_argument("--minutes", type=float, help="wall-time cap in minutes")
-    p.set_defaults(func=run)
 
 
 def run(args) -> int:
