@@ -181,21 +181,30 @@ class StictionArm(LaggingArm):
         self.q = self.q + PHYSICS_DT / self.tau * push
 
 
-def _reversal_error(direction_memory: bool) -> float:
-    """Peak joint-1 error over the 3rd-5th periods of a back-and-forth desired motion."""
+def _peak_stiction_error(direction_memory: bool, seconds: float, desired) -> float:
+    """Peak joint-1 error after t = 2 s of the PI servo on stiction, commanded desired(t, dt)."""
     arm = StictionArm()
     pi = PIServo(arm, gains=PIGains(direction_memory=direction_memory))
     every = round(pi.dt / PHYSICS_DT)
     peak = 0.0
-    for k in range(round(5.0 / PHYSICS_DT)):
+    for k in range(round(seconds / PHYSICS_DT)):
         t = k * PHYSICS_DT
         if k % every == 0:
-            pi.servo_jp(Q0 + np.r_[0.05 * np.sin(2 * np.pi * t), 0, 0, 0, 0, 0])
+            pi.servo_jp(desired(t, pi.dt))
             pi.update(t)
         arm.physics_step()
         if t > 2.0:
             peak = max(peak, abs(pi.desired[0] - arm.q[0]))
     return peak
+
+
+def _reversal_error(direction_memory: bool) -> float:
+    """Peak joint-1 error over the 3rd-5th periods of a back-and-forth desired motion."""
+
+    def sine(t: float, dt: float) -> np.ndarray:
+        return Q0 + np.r_[0.05 * np.sin(2 * np.pi * t), 0, 0, 0, 0, 0]
+
+    return _peak_stiction_error(direction_memory, 5.0, sine)
 
 
 def test_direction_memory_removes_most_of_the_lag_at_motion_reversals():
@@ -206,21 +215,14 @@ def test_direction_memory_removes_most_of_the_lag_at_motion_reversals():
 
 def _restart_error(direction_memory: bool) -> float:
     """Peak joint-1 error of the 3rd ramp of ramp-hold-ramp-hold-ramp motion on stiction."""
-    arm = StictionArm()
-    pi = PIServo(arm, gains=PIGains(direction_memory=direction_memory))
-    every = round(pi.dt / PHYSICS_DT)
-    peak, q1 = 0.0, Q0[0]
-    for k in range(round(3.0 / PHYSICS_DT)):
-        t = k * PHYSICS_DT
-        if k % every == 0:
-            if (t % 1.0) < 0.5:  # 0.5 s at 0.2 rad/s, then 0.5 s of hold
-                q1 += 0.2 * pi.dt
-            pi.servo_jp(np.r_[q1, Q0[1:]])
-            pi.update(t)
-        arm.physics_step()
-        if t > 2.0:
-            peak = max(peak, abs(pi.desired[0] - arm.q[0]))
-    return peak
+    q1 = [Q0[0]]
+
+    def ramps(t: float, dt: float) -> np.ndarray:
+        if (t % 1.0) < 0.5:  # 0.5 s at 0.2 rad/s, then 0.5 s of hold
+            q1[0] += 0.2 * dt
+        return np.r_[q1[0], Q0[1:]]
+
+    return _peak_stiction_error(direction_memory, 3.0, ramps)
 
 
 def test_motion_restarts_from_the_integrator_of_the_last_motion_not_of_the_hold():
