@@ -115,8 +115,13 @@ def mesh_cache_dir() -> Path:
 
 
 def band_vertices(model: NeedleModel, V: np.ndarray) -> np.ndarray:
-    """Boolean per vertex: within ``BAND_LENGTH`` of arc from the base end (base cap included)."""
-    angle = np.mod(np.arctan2(V[:, 1], V[:, 0]) - model.tip_angle, 2 * np.pi) + model.tip_angle
+    """Boolean per vertex: within ``BAND_LENGTH`` of arc from the base end (base cap included).
+
+    Angles are measured from the arc's bisector, so the tip cap (just past the tip angle) is far
+    from the base and stays metal.
+    """
+    mid = 0.5 * (model.base_angle + model.tip_angle)
+    angle = mid + np.angle(np.exp(1j * (np.arctan2(V[:, 1], V[:, 0]) - mid)))
     return (model.base_angle - angle) * model.radius < BAND_LENGTH
 
 
@@ -143,7 +148,7 @@ def write_needle_obj(model: NeedleModel, folder: Path | None = None) -> Path:
     Texture coordinates map the base band to the violet half of :func:`write_needle_texture`.
     """
     key = f"{model.radius:.9g}_{model.base_angle:.9g}_{model.tip_angle:.9g}_{model.wire_radius:.9g}"
-    key += f"_{N_ALONG}_{N_AROUND}_{N_CAP}_{BAND_LENGTH:.6g}_v3"
+    key += f"_{N_ALONG}_{N_AROUND}_{N_CAP}_{BAND_LENGTH:.6g}_v4"
     name = "needle_" + hashlib.sha1(key.encode()).hexdigest()[:16] + ".obj"
     path = (folder if folder is not None else mesh_cache_dir()) / name
     if path.exists():

@@ -5,7 +5,13 @@ from collections import Counter
 import numpy as np
 
 from suture_bt.geometry.needle import NeedleModel
-from suture_bt.sim.needle_mesh import N_AROUND, needle_mesh_arrays, write_needle_obj
+from suture_bt.sim.needle_mesh import (
+    BAND_LENGTH,
+    N_AROUND,
+    band_vertices,
+    needle_mesh_arrays,
+    write_needle_obj,
+)
 
 MODEL = NeedleModel()
 
@@ -49,3 +55,18 @@ def test_obj_written_once_per_geometry(tmp_path):
     assert write_needle_obj(MODEL, tmp_path) == path and path.stat().st_mtime_ns == mtime
     thick = NeedleModel(wire_radius=0.0005)
     assert write_needle_obj(thick, tmp_path) != path
+
+
+def test_band_covers_the_base_end_only():
+    """The violet band: every vertex within BAND_LENGTH of arc from the base (its cap too);
+    none near the tip, whose cap once wrapped round to the band (a 180° base/tip cue error)."""
+    V, _, _ = needle_mesh_arrays(MODEL)
+    band = band_vertices(MODEL, V)
+    base, tip = MODEL.point_at(MODEL.base_angle), MODEL.point_at(MODEL.tip_angle)
+    near_base = np.linalg.norm(V - base, axis=1) < 1.5 * MODEL.wire_radius
+    near_tip = np.linalg.norm(V - tip, axis=1) < 0.5 * BAND_LENGTH
+    assert band[near_base].all()
+    assert not band[near_tip].any()
+    arc = MODEL.radius * (MODEL.base_angle - MODEL.tip_angle)
+    share = band.mean()
+    assert 0.5 * BAND_LENGTH / arc < share < 2.0 * BAND_LENGTH / arc
