@@ -73,3 +73,20 @@ def test_shipped_network_localizes_a_rendered_needle():
     assert pos < 2.0 and ang < 5.0  # base and tip told apart (the swage band's colour)
     assert est.end_decided_by == "colour"
     assert est.timings_ms["total"] > 0
+
+
+def test_wrong_disparity_depth_falls_back_to_the_widest_wire_gate():
+    """A depth hint far too deep gates the mask thinner than the wire, dropping every needle
+    pixel as 'thick' (NeedleNotFound, which localize() answers by retrying without the hint);
+    without the hint the wire's pixels are kept."""
+    from suture_bt.perception import needle_localizer as nl
+    from suture_bt.perception.pose_fit import MaskView
+
+    loc = NeedleLocalizer(stereo(640, 360), net=_eager_net())
+    img = np.zeros((360, 640, 3), np.uint8)
+    img[150:154, 280:340] = (160, 160, 168)  # a grey bar 4 px wide: a wire at 0.1 m
+    prob = np.ones((2, 90, 160), np.float32)
+    with pytest.raises(NeedleNotFound):
+        loc._masks((img, img), prob, 4.0, 0.3)
+    views, half_width = loc._masks((img, img), prob, 4.0, None)
+    assert isinstance(views[0], MaskView) and half_width > nl.MIN_HALF_WIDTH_PX

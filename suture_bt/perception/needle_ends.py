@@ -24,6 +24,10 @@ MIN_END_PIXELS = 3
 VIOLET_THRESHOLD = 0.3
 #: |evidence| below this is undecided (the band is hidden or too small to see).
 MIN_EVIDENCE = 0.15
+#: A mask pixel this violet (well above sensor noise on dim metal) counts as band.
+BAND_PIXEL_SCORE = 0.45
+#: Fewest band pixels in one eye for their position to vote.
+MIN_BAND_PIXELS = 6
 
 
 def swap_rotation(model: NeedleModel) -> np.ndarray:
@@ -78,6 +82,32 @@ def _end_score(
     return float(np.median(violet_score(rgb[sel[:, 1], sel[:, 0]])))
 
 
+def _band_position_vote(
+    rgb: np.ndarray, view: MaskView, cam: CameraModel, T_cam_needle: np.ndarray, model
+) -> float | None:
+    """+1..−1: the mask's violet pixels lie nearer the fitted base end than the fitted tip.
+
+    Unlike the end scores this needs only a rough fit (a pose a few pixels off, e.g. a needle
+    seen edge-on), since the ends are far apart compared with the fit's error.
+    """
+    ys, xs = np.nonzero(view.mask)
+    if len(xs) == 0:
+        return None
+    pix = rgb[ys + view.origin[1], xs + view.origin[0]]
+    band = violet_score(pix) > BAND_PIXEL_SCORE
+    if band.sum() < MIN_BAND_PIXELS:
+        return None
+    ends = np.stack([model.base, model.tip]) @ T_cam_needle[:3, :3].T + T_cam_needle[:3, 3]
+    if np.any(ends[:, 2] <= 0):
+        return None
+    u = cam.fx * ends[:, 0] / ends[:, 2] + cam.cx
+    v = cam.fy * ends[:, 1] / ends[:, 2] + cam.cy
+    p = np.stack([xs[band] + view.origin[0], ys[band] + view.origin[1]], 1).astype(float)
+    d_base = float(np.median(np.hypot(p[:, 0] - u[0], p[:, 1] - v[0])))
+    d_tip = float(np.median(np.hypot(p[:, 0] - u[1], p[:, 1] - v[1])))
+    return float(np.clip((d_tip - d_base) / max(d_tip + d_base, 1.0), -1.0, 1.0))
+
+
 def base_evidence(
     images: tuple[np.ndarray, np.ndarray],
     views: tuple[MaskView, MaskView],
@@ -85,8 +115,9 @@ def base_evidence(
     T_cam_needle: np.ndarray,
     model: NeedleModel,
 ) -> float:
-    """Mean vote of the visible ends (both eyes): violet at the fitted base and grey at the
-    fitted tip vote > 0 (base and tip right), the opposite < 0 (swapped); 0 when none is seen.
+    """Mean vote of both eyes: violet at the fitted base, grey at the fitted tip and violet
+    pixels nearer the fitted base than the tip vote > 0 (base and tip right), the opposite < 0
+    (swapped); 0 when nothing is seen.
 
     ``T_cam_needle`` is in the first camera's frame; ``cams[1]`` is placed relative to it.
     """
@@ -105,4 +136,7 @@ def base_evidence(
             votes.append(sb - VIOLET_THRESHOLD)
         if st is not None:
             votes.append(VIOLET_THRESHOLD - st)
+        band = _band_position_vote(rgb, view, cam, T, model)
+        if band is not None:
+            votes.append(band)
     return float(np.mean(votes)) if votes else 0.0

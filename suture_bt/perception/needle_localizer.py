@@ -177,28 +177,15 @@ class NeedleLocalizer:
         prob, kp, score, scale = self.network(left, right)
         t1 = time.perf_counter()
         ends, depth = self._ends_and_depth(kp, score)
-        # Widest plausible wire (half width, px): from the disparity depth, else the nearest
-        # working distance; anything thicker touching the needle (jaws, shaft) is dropped.
-        z_min = 0.85 * depth if depth is not None else MIN_DEPTH
-        half_width = 1.35 * self.model.wire_radius * self.stereo.left.fx / max(z_min, MIN_DEPTH)
-        half_width = max(half_width, MIN_HALF_WIDTH_PX)
-        views = []
-        for eye, img in enumerate((left, right)):
-            name = ("left", "right")[eye]
-            h = int(round(img.shape[0] / scale))
-            coarse = coarse_components(prob[eye][:h], self.coarse_threshold)
-            if coarse.sum() == 0:
-                raise NeedleNotFound(f"the network sees no needle in the {name} image")
-            view = refine_mask(img, coarse, scale, self.rule, half_width)
-            if int(view.mask.sum()) < MIN_NEEDLE_PIXELS:
-                raise NeedleNotFound(
-                    f"too few needle-coloured pixels in the {name} image "
-                    f"({int(view.mask.sum())} < {MIN_NEEDLE_PIXELS})"
-                )
-            if self.use_free_space:
-                dt, org = free_space_dt(img, view)
-                view = MaskView(view.mask, view.origin, dt, org)
-            views.append(view)
+        try:
+            views, half_width = self._masks((left, right), prob, scale, depth)
+        except NeedleNotFound:
+            if depth is None:
+                raise
+            # A wrong disparity depth makes the wire look thicker than it can be (a needle seen
+            # edge-on folds onto itself): drop the hint and gate at the nearest working distance.
+            depth = None
+            views, half_width = self._masks((left, right), prob, scale, depth)
         t2 = time.perf_counter()
         fit = self._fit(left, views, ends, depth, half_width, previous)
         t3 = time.perf_counter()
@@ -226,6 +213,34 @@ class NeedleLocalizer:
             fit=fit,
             masks=(views[0], views[1]),
         )
+
+    def _masks(self, images, prob, scale, depth):
+        """Both eyes' refined needle masks and the widest plausible wire half width (px).
+
+        The half width comes from the disparity depth, else the nearest working distance;
+        anything thicker touching the needle (jaws, shaft) is dropped.
+        """
+        z_min = 0.85 * depth if depth is not None else MIN_DEPTH
+        half_width = 1.35 * self.model.wire_radius * self.stereo.left.fx / max(z_min, MIN_DEPTH)
+        half_width = max(half_width, MIN_HALF_WIDTH_PX)
+        views = []
+        for eye, img in enumerate(images):
+            name = ("left", "right")[eye]
+            h = int(round(img.shape[0] / scale))
+            coarse = coarse_components(prob[eye][:h], self.coarse_threshold)
+            if coarse.sum() == 0:
+                raise NeedleNotFound(f"the network sees no needle in the {name} image")
+            view = refine_mask(img, coarse, scale, self.rule, half_width)
+            if int(view.mask.sum()) < MIN_NEEDLE_PIXELS:
+                raise NeedleNotFound(
+                    f"too few needle-coloured pixels in the {name} image "
+                    f"({int(view.mask.sum())} < {MIN_NEEDLE_PIXELS})"
+                )
+            if self.use_free_space:
+                dt, org = free_space_dt(img, view)
+                view = MaskView(view.mask, view.origin, dt, org)
+            views.append(view)
+        return views, half_width
 
     def _fit(self, left, views, ends, depth, half_width, previous) -> PoseFitResult:
         """Fit from the keypoints (and depth hint), plus end hypotheses behind occluders.
