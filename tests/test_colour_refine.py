@@ -62,6 +62,19 @@ def test_remove_thick_keeps_thin_lines():
     assert (remove_thick(m, 3.0) == m).all()
 
 
+def test_remove_thick_ignores_a_fat_speck_in_the_wire():
+    """A wire a little fatter than the gate in one spot (a couple of deep pixels) keeps its
+    pixels; a jaw-sized blob touching it is still removed."""
+    m = np.zeros((60, 80), bool)
+    m[28:34, 5:75] = True  # wire, 6 px wide (DT ≈ 3.5)
+    m[26:35, 37:42] = True  # 9 px wide for 5 columns: one pixel deeper than the gate
+    out = remove_thick(m, 4.0)
+    assert (out == m).all()
+    m[10:40, 60:80] = True  # a jaw
+    out = remove_thick(m, 4.0)
+    assert not out[10:40, 62:80].any() and out[28:34, 5:50].all()
+
+
 def test_empty_coarse_mask_gives_empty_view():
     img, _ = _scene()
     view = refine_mask(img, np.zeros((135, 240), bool), 4.0)

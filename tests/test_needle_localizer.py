@@ -75,18 +75,19 @@ def test_shipped_network_localizes_a_rendered_needle():
     assert est.timings_ms["total"] > 0
 
 
-def test_wrong_disparity_depth_falls_back_to_the_widest_wire_gate():
-    """A depth hint far too deep gates the mask thinner than the wire, dropping every needle
-    pixel as 'thick' (NeedleNotFound, which localize() answers by retrying without the hint);
-    without the hint the wire's pixels are kept."""
-    from suture_bt.perception import needle_localizer as nl
-    from suture_bt.perception.pose_fit import MaskView
-
-    loc = NeedleLocalizer(stereo(640, 360), net=_eager_net())
-    img = np.zeros((360, 640, 3), np.uint8)
-    img[150:154, 280:340] = (160, 160, 168)  # a grey bar 4 px wide: a wire at 0.1 m
-    prob = np.ones((2, 90, 160), np.float32)
-    with pytest.raises(NeedleNotFound):
-        loc._masks((img, img), prob, 4.0, 0.3)
-    views, half_width = loc._masks((img, img), prob, 4.0, None)
-    assert isinstance(views[0], MaskView) and half_width > nl.MIN_HALF_WIDTH_PX
+def test_keypoint_depth_contradicted_by_the_masks_neither_gates_nor_hints():
+    """A keypoint depth far too deep (0.3 m for a wire at 0.1 m) would gate the mask thinner
+    than the wire and drop it all; the masks' own stereo disparity overrides it."""
+    loc = NeedleLocalizer(stereo(1920, 1080), net=_eager_net())
+    left = np.zeros((1080, 1920, 3), np.uint8)
+    right = left.copy()
+    d = loc.stereo.left.fx * loc.stereo.baseline / 0.1  # 31.6 px at 0.1 m
+    left[500:506, 900:1000] = (160, 160, 168)  # a wire 6 px wide: 0.72 mm at 0.1 m
+    right[500:506, 900 - round(d) : 1000 - round(d)] = (160, 160, 168)
+    prob = np.ones((2, 270, 480), np.float32)
+    views, half_width, depth = loc._masks((left, right), prob, 4.0, 0.3)
+    assert views[0].mask.sum() == 600 and views[1].mask.sum() == 600
+    assert depth is None and half_width > 3.0
+    # Agreeing depths are kept as the fit's hint.
+    _, _, depth = loc._masks((left, right), prob, 4.0, 0.105)
+    assert depth == 0.105

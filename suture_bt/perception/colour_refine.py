@@ -39,6 +39,10 @@ def coarse_components(prob: np.ndarray, threshold: float = 0.5, keep_ratio: floa
     return np.isin(lab, keep)
 
 
+#: Least area of a thick core, in units of the squared gate half width (see remove_thick).
+MIN_CORE_AREA = 0.25
+
+
 def remove_thick(mask: np.ndarray, max_half_width_px: float) -> np.ndarray:
     """Drop blobs thicker than the wire (grey jaws, shaft) that touch the needle's mask.
 
@@ -51,6 +55,12 @@ def remove_thick(mask: np.ndarray, max_half_width_px: float) -> np.ndarray:
         return mask
     dt = cv2.distanceTransform(np.pad(m, 1), cv2.DIST_L2, 5)[1:-1, 1:-1]
     core = (dt > max_half_width_px).astype(np.uint8)
+    # A few deep pixels inside the wire itself (where it crosses itself or is rendered a
+    # pixel fat) are not a jaw: cores smaller than a quarter of the gate's square are ignored.
+    n, lab, stats, _ = cv2.connectedComponentsWithStats(core, connectivity=8)
+    specks = 1 + np.nonzero(stats[1:, cv2.CC_STAT_AREA] < MIN_CORE_AREA * max_half_width_px**2)[0]
+    if len(specks):
+        core[np.isin(lab, specks)] = 0
     if not core.any():
         return mask
     r = int(np.ceil(max_half_width_px)) + 2
@@ -89,7 +99,15 @@ def refine_mask(
     gate = cv2.dilate(gate, cv2.getStructuringElement(cv2.MORPH_ELLIPSE, (k, k))) > 0
     level = crop.sum(-1) / 3.0
     needle = (crop[..., 2] - crop[..., 0] >= rule.min_blue_minus_red) & (level >= rule.min_level)
-    m = needle & gate
+    return drop_thick(MaskView(needle & gate, (x0, y0)), max_half_width_px, rule)
+
+
+def drop_thick(
+    view: MaskView, max_half_width_px: float | None, rule: ColourRule = ColourRule()
+) -> MaskView:
+    """The mask without blobs thicker than ``max_half_width_px`` (if given, see
+    :func:`remove_thick`) and without specks smaller than ``rule.min_component_px``."""
+    m = view.mask
     if max_half_width_px is not None:
         m = remove_thick(m, max_half_width_px)
     m = m.astype(np.uint8)
@@ -97,7 +115,7 @@ def refine_mask(
     small = 1 + np.nonzero(stats[1:, cv2.CC_STAT_AREA] < rule.min_component_px)[0]
     if len(small):
         m[np.isin(lab, small)] = 0
-    return MaskView(m.astype(bool), (x0, y0))
+    return MaskView(m.astype(bool), view.origin)
 
 
 def free_space_dt(

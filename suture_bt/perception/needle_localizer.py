@@ -25,9 +25,11 @@ from suture_bt.interfaces import StereoCameraModel
 from suture_bt.perception.colour_refine import (
     ColourRule,
     coarse_components,
+    drop_thick,
     free_space_dt,
     refine_mask,
 )
+from suture_bt.perception.mask_disparity import mask_disparity
 from suture_bt.perception.needle_ends import MIN_EVIDENCE, base_evidence, swapped
 from suture_bt.perception.needle_projection import project_cam, transform_points
 from suture_bt.perception.network import (
@@ -59,6 +61,8 @@ RETRY_INLIERS = 0.85
 MIN_DEPTH = 0.05
 #: Farthest plausible needle distance (m) for a disparity depth hint.
 MAX_DEPTH = 0.35
+#: Keypoint and mask stereo depths further apart than this (relative) disagree.
+DEPTH_AGREEMENT = 0.3
 #: Never treat a blob thinner than this (half width, px) as thicker than the wire.
 MIN_HALF_WIDTH_PX = 1.5
 
@@ -178,14 +182,13 @@ class NeedleLocalizer:
         t1 = time.perf_counter()
         ends, depth = self._ends_and_depth(kp, score)
         try:
-            views, half_width = self._masks((left, right), prob, scale, depth)
+            views, half_width, depth = self._masks((left, right), prob, scale, depth)
         except NeedleNotFound:
             if depth is None:
                 raise
             # A wrong disparity depth makes the wire look thicker than it can be (a needle seen
             # edge-on folds onto itself): drop the hint and gate at the nearest working distance.
-            depth = None
-            views, half_width = self._masks((left, right), prob, scale, depth)
+            views, half_width, depth = self._masks((left, right), prob, scale, None)
         t2 = time.perf_counter()
         fit = self._fit(left, views, ends, depth, half_width, previous)
         t3 = time.perf_counter()
@@ -215,32 +218,45 @@ class NeedleLocalizer:
         )
 
     def _masks(self, images, prob, scale, depth):
-        """Both eyes' refined needle masks and the widest plausible wire half width (px).
+        """Both eyes' refined needle masks, the depth hint for the fit and the gate (px).
 
-        The half width comes from the disparity depth, else the nearest working distance;
-        anything thicker touching the needle (jaws, shaft) is dropped.
+        Blobs touching the needle that are thicker than the widest plausible wire (jaws,
+        shaft) are dropped. That width comes from the nearer of the keypoints' and the masks'
+        stereo depths (a wrong depth must not make the gate thinner than the wire), else from
+        the nearest working distance. A keypoint depth the masks contradict is not used as
+        the fit's hint.
         """
-        z_min = 0.85 * depth if depth is not None else MIN_DEPTH
-        half_width = 1.35 * self.model.wire_radius * self.stereo.left.fx / max(z_min, MIN_DEPTH)
-        half_width = max(half_width, MIN_HALF_WIDTH_PX)
-        views = []
+        raw = []
         for eye, img in enumerate(images):
             name = ("left", "right")[eye]
             h = int(round(img.shape[0] / scale))
             coarse = coarse_components(prob[eye][:h], self.coarse_threshold)
             if coarse.sum() == 0:
                 raise NeedleNotFound(f"the network sees no needle in the {name} image")
-            view = refine_mask(img, coarse, scale, self.rule, half_width)
+            raw.append(refine_mask(img, coarse, scale, self.rule))
+        fb = self.stereo.left.fx * self.stereo.baseline
+        disp = mask_disparity(raw[0], raw[1], fb / MAX_DEPTH, fb / MIN_DEPTH)
+        mask_depth = fb / disp if disp is not None and disp > 0 else None
+        depths = [z for z in (depth, mask_depth) if z is not None]
+        if depth is not None and mask_depth is not None:
+            if abs(depth / mask_depth - 1.0) > DEPTH_AGREEMENT:
+                depth = None
+        z_min = 0.85 * min(depths) if depths else MIN_DEPTH
+        half_width = 1.35 * self.model.wire_radius * self.stereo.left.fx / max(z_min, MIN_DEPTH)
+        half_width = max(half_width, MIN_HALF_WIDTH_PX)
+        views = []
+        for eye, (img, view) in enumerate(zip(images, raw, strict=True)):
+            view = drop_thick(view, half_width, self.rule)
             if int(view.mask.sum()) < MIN_NEEDLE_PIXELS:
                 raise NeedleNotFound(
-                    f"too few needle-coloured pixels in the {name} image "
+                    f"too few needle-coloured pixels in the {('left', 'right')[eye]} image "
                     f"({int(view.mask.sum())} < {MIN_NEEDLE_PIXELS})"
                 )
             if self.use_free_space:
                 dt, org = free_space_dt(img, view)
                 view = MaskView(view.mask, view.origin, dt, org)
             views.append(view)
-        return views, half_width
+        return views, half_width, depth
 
     def _fit(self, left, views, ends, depth, half_width, previous) -> PoseFitResult:
         """Fit from the keypoints (and depth hint), plus end hypotheses behind occluders.
