@@ -66,6 +66,8 @@ def test_shipped_network_localizes_a_rendered_needle():
             pytest.fail("no seeded scene shows the needle")
         right, _ = sim.render("right", s, rng)
         est = NeedleLocalizer(sim.stereo).localize(left, right)
+        with pytest.raises(NeedleNotFound, match="RMS"):  # a fit worse than allowed is refused
+            NeedleLocalizer(sim.stereo, max_rms_px=0.0).localize(left, right)
         T_true = invert(sim.stereo.left.T_world_cam) @ s.T_world_needle
     finally:
         sim.close()

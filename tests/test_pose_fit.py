@@ -91,6 +91,15 @@ def test_warm_start_converges_without_end_points():
     assert pos < 1.0 and ang < 2.5
 
 
+def test_poses_outside_the_working_distance_are_refused():
+    """A needle 80-120 mm away cannot be explained within 200-300 mm: a reasoned refusal."""
+    st, T, left, right, ends = _scene_1080p(3, 0.0)
+    with pytest.raises(NeedleNotFound, match="200-300 mm from the camera"):
+        PoseFitter(st, MODEL, depth_range=(0.2, 0.3)).fit(left, right, tuple(ends))
+    res = PoseFitter(st, MODEL, depth_range=(0.05, 0.3)).fit(left, right, tuple(ends))
+    assert 0.05 <= res.T_cam_needle[2, 3] <= 0.3
+
+
 def test_empty_mask_raises_needle_not_found():
     st = stereo(640, 480)
     empty = MaskView(np.zeros((480, 640), bool))

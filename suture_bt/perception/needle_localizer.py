@@ -57,6 +57,9 @@ MIN_END_SEPARATION_PX = 8.0
 #: A fit worse than this (RMS edge residual, px; inlier share) is retried from the mask's ends.
 RETRY_RMS_PX = 0.45
 RETRY_INLIERS = 0.85
+#: A final fit whose RMS edge residual exceeds this (px) is refused: in the benchmarks every
+#: correct fit stayed below 0.45 px and every fit above 0.6 px was centimetres off.
+MAX_RMS_PX = 0.6
 #: Nearest needle distance considered (m), for the widest plausible wire in pixels.
 MIN_DEPTH = 0.05
 #: Farthest plausible needle distance (m) for a disparity depth hint.
@@ -116,9 +119,11 @@ class NeedleLocalizer:
         threads: int | None = None,
         rule: ColourRule | None = None,
         use_free_space: bool = False,
+        max_rms_px: float = MAX_RMS_PX,
     ) -> None:
         """``use_free_space`` adds the pose fit's free-space term (experimental: it did not
-        change the occluded-benchmark figures in a first test and is off by default)."""
+        change the occluded-benchmark figures in a first test and is off by default);
+        ``max_rms_px`` is the worst final edge residual accepted (else NeedleNotFound)."""
         self.stereo = stereo
         self.model = model or NeedleModel()
         self.net = net if net is not None else load_network(weights)
@@ -127,7 +132,8 @@ class NeedleLocalizer:
             torch.set_num_threads(threads)
         self.rule = rule or ColourRule()
         self.use_free_space = use_free_space
-        self.fitter = PoseFitter(stereo, self.model)
+        self.max_rms_px = max_rms_px
+        self.fitter = PoseFitter(stereo, self.model, depth_range=(MIN_DEPTH, MAX_DEPTH))
         self.input_width = INPUT_SIZE[0]
         self.coarse_threshold = 0.3
 
@@ -294,6 +300,12 @@ class NeedleLocalizer:
                 pass
         if fit is None:
             raise NeedleNotFound("no pose explains the needle's outline (every start failed)")
+        if fit.rms_px > self.max_rms_px:
+            raise NeedleNotFound(
+                f"the best pose misses the needle's outline by {fit.rms_px:.2f} px RMS "
+                f"(> {self.max_rms_px:.2f}; {100 * fit.inlier_fraction:.0f} % of its edge "
+                "explained): too little of the needle is seen clearly"
+            )
         return fit
 
     def _orient(self, T_cam: np.ndarray, images, views, kp, score):

@@ -355,6 +355,9 @@ class PoseFitter:
     #: LM iterations: all kept starts (σ = 3 px, then 1 px) on a subsample, then the best two
     #: on every edge point.
     iterations: tuple[int, int, int] = (10, 10, 8)
+    #: Working distance (m) of the arc centre from the left camera: fits outside are rejected
+    #: (a short visible piece is also explained by a much nearer, larger-looking needle).
+    depth_range: tuple[float, float] = (0.03, 0.5)
 
     def fit(
         self,
@@ -417,6 +420,12 @@ class PoseFitter:
         it1, it2, it3 = self.iterations
         x, _ = levenberg_marquardt(starts, mid, self.stereo, self.model, it1, 3.0, free)
         x, c = levenberg_marquardt(x, mid, self.stereo, self.model, it2, 1.0, free)
+        c = np.where(self._in_range(x), c, np.inf)
+        if not np.isfinite(c).any():
+            lo, hi = self.depth_range
+            raise NeedleNotFound(
+                f"no pose {1e3 * lo:.0f}-{1e3 * hi:.0f} mm from the camera explains the outline"
+            )
         order = np.argsort(c)
         T_mid = params_to_pose(x[order], cam, self.model)
         finals = [order[0]]
@@ -427,6 +436,7 @@ class PoseFitter:
                 finals.append(k)
                 break
         xf, cf = levenberg_marquardt(x[finals], rays, self.stereo, self.model, it3, 1.0, free)
+        cf = np.where(self._in_range(xf), cf, np.inf)
         if not np.isfinite(cf).any():
             raise NeedleNotFound("pose fit diverged")
         b = int(np.argmin(cf))
@@ -447,6 +457,11 @@ class PoseFitter:
             ambiguity=amb,
             candidates=[params_to_pose(xx, cam, self.model) for xx in xf],
         )
+
+    def _in_range(self, x: np.ndarray) -> np.ndarray:
+        """Which parameter rows put the arc centre within ``depth_range`` of the camera."""
+        z = params_to_pose(x, self.stereo.left, self.model)[:, 2, 3]
+        return (z >= self.depth_range[0]) & (z <= self.depth_range[1])
 
     def _starts(self, ub: np.ndarray, ut: np.ndarray, depth_hint: float | None) -> np.ndarray:
         """Start parameters over depths × both chord roots × psi."""
