@@ -12,6 +12,7 @@ from suture_bt.perception.network import (
     count_parameters,
     decode_ends,
     decode_keypoints,
+    for_inference,
     load_network,
     save_weights,
     to_input,
@@ -97,3 +98,19 @@ def test_decode_ends_finds_both_peaks_and_orders_base_first():
     ends_kp, scores = decode_ends(logit(ends), logit(gauss(45.0, 30.4)))
     np.testing.assert_allclose(ends_kp[0], [[45.0, 30.4], [10.2, 12.0]], atol=0.15)
     assert scores.shape == (1, 2)
+
+
+def test_inference_copy_gives_the_same_outputs_and_leaves_the_original_alone():
+    torch.manual_seed(3)
+    net = NeedleNet(width=8)
+    net.train()
+    x = torch.rand(2, 3, 64, 96)
+    net(x)  # moves the BatchNorm running statistics off their defaults
+    net.eval()
+    fast = for_inference(net)
+    with torch.no_grad():
+        ref = net(x)
+        out = fast(x.contiguous(memory_format=torch.channels_last))
+    assert torch.allclose(ref, out, atol=1e-4)
+    assert not any(isinstance(m, torch.nn.BatchNorm2d) for m in fast.modules())
+    assert any(isinstance(m, torch.nn.BatchNorm2d) for m in net.modules())

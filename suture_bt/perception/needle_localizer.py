@@ -37,6 +37,7 @@ from suture_bt.perception.network import (
     OUTPUT_STRIDE,
     NeedleNet,
     decode_ends,
+    for_inference,
     load_network,
 )
 from suture_bt.perception.occlusion import end_is_occluded, extended_ends
@@ -126,8 +127,7 @@ class NeedleLocalizer:
         ``max_rms_px`` is the worst final edge residual accepted (else NeedleNotFound)."""
         self.stereo = stereo
         self.model = model or NeedleModel()
-        self.net = net if net is not None else load_network(weights)
-        self.net.eval()
+        self.net = for_inference(net if net is not None else load_network(weights))
         if threads is not None:
             torch.set_num_threads(threads)
         self.rule = rule or ColourRule()
@@ -146,6 +146,7 @@ class NeedleLocalizer:
         a, s = _net_input(left, self.input_width)
         b, _ = _net_input(right, self.input_width)
         x = torch.from_numpy(np.stack([a, b])).permute(0, 3, 1, 2).float().div_(255.0)
+        x = x.contiguous(memory_format=torch.channels_last)
         with torch.inference_mode():
             out = self.net(x)
         prob = torch.sigmoid(out[:, 0]).numpy()
@@ -288,11 +289,14 @@ class NeedleLocalizer:
         except NeedleNotFound:
             if ends is None and depth is None:
                 raise
-        if fit is None or fit.rms_px > RETRY_RMS_PX or fit.inlier_fraction < RETRY_INLIERS:
-            retry = [None] + behind if ends is not None else behind
+        poor = fit is None or fit.rms_px > RETRY_RMS_PX or fit.inlier_fraction < RETRY_INLIERS
+        if poor and ends is not None:
+            # The first fit already searched the occluded-end hypotheses at every depth; new
+            # here are the keypoints without the depth hint and the mask's own ends.
+            main, others = (ends, [None]) if depth is not None else (None, [])
             try:
                 alt = self.fitter.fit(
-                    views[0], views[1], ends, warm_start=previous, alternatives=retry
+                    views[0], views[1], main, warm_start=previous, alternatives=others
                 )
                 if fit is None or alt.cost < fit.cost:
                     fit = alt

@@ -10,12 +10,14 @@ Weights load with ``torch.load(weights_only=True)``; a missing or mismatched fil
 
 from __future__ import annotations
 
+import copy
 from pathlib import Path
 
 import numpy as np
 import torch
 from torch import nn
 from torch.nn import functional as F
+from torch.nn.utils.fusion import fuse_conv_bn_eval
 
 #: Network input size (width, height) used for training and inference.
 INPUT_SIZE = (480, 272)
@@ -76,6 +78,21 @@ class NeedleNet(nn.Module):
         d2 = self.dec2(self.lat2(e2) + F.interpolate(d3, size=e2.shape[-2:], mode="nearest"))
         d1 = self.dec1(self.lat1(e1) + F.interpolate(d2, size=e1.shape[-2:], mode="nearest"))
         return self.head(d1)
+
+
+def for_inference(net: NeedleNet) -> NeedleNet:
+    """An evaluation copy with each BatchNorm folded into its convolution, in channels-last
+    memory: the same outputs (to float rounding), about twice as fast on a CPU."""
+    net = copy.deepcopy(net).eval()
+    for mod in net.modules():
+        if isinstance(mod, nn.Sequential):
+            names = list(mod._modules)
+            for a, b in zip(names, names[1:], strict=False):
+                conv, bn = mod._modules[a], mod._modules[b]
+                if isinstance(conv, nn.Conv2d) and isinstance(bn, nn.BatchNorm2d):
+                    mod._modules[a] = fuse_conv_bn_eval(conv, bn)
+                    mod._modules[b] = nn.Identity()
+    return net.to(memory_format=torch.channels_last)
 
 
 def count_parameters(net: nn.Module) -> int:
