@@ -29,6 +29,7 @@ from suture_bt.calibration.offset_regressor import (
     regressor_features,
 )
 from suture_bt.calibration.scene_geometry import PSM_BASES, REFERENCE_SIZE, endoscope_model
+from suture_bt.dataset_shards import load_shards
 
 #: Jitter of the measured joints around the calibration pose (rad, rad, m, rad, rad, rad) in
 #: the regressor's data: the low-level servo alone stops 1.1-2.0° / 0.06-0.15 mm short
@@ -333,12 +334,4 @@ def validation_error(det, data: dict) -> dict:
 
 def load_windows(folder) -> dict:
     """All ``calibration_*.npz`` shards of a dataset folder, concatenated."""
-    from pathlib import Path
-
-    files = sorted(Path(folder).glob("calibration_*.npz"))
-    if not files:
-        raise FileNotFoundError(
-            f"no calibration_*.npz shards in {folder}: run `suture-bt data calibration` first"
-        )
-    parts = [dict(np.load(f)) for f in files]
-    return {k: np.concatenate([p[k] for p in parts]) for k in parts[0]}
+    return load_shards(folder, "calibration_*.npz", "suture-bt data calibration")

@@ -20,6 +20,7 @@ import torch
 from torch.nn import functional as F
 from tqdm import tqdm
 
+from suture_bt.dataset_shards import load_shards
 from suture_bt.perception.network import OUTPUT_STRIDE, NeedleNet, count_parameters, save_weights
 
 HEATMAP_SIGMA = 1.5  # output pixels
@@ -45,13 +46,7 @@ class TrainConfig:
 
 def load_dataset(folder: Path) -> dict[str, np.ndarray]:
     """All ``shard_*.npz`` of a dataset folder, concatenated."""
-    files = sorted(Path(folder).glob("shard_*.npz"))
-    if not files:
-        raise FileNotFoundError(
-            f"no shard_*.npz files in {folder} (create them with `suture-bt data needle`)"
-        )
-    parts = [dict(np.load(f)) for f in files]
-    return {k: np.concatenate([p[k] for p in parts]) for k in parts[0]}
+    return load_shards(folder, "shard_*.npz", "suture-bt data needle")
 
 
 def heatmap_targets(kp: np.ndarray, vis: np.ndarray, h: int, w: int) -> np.ndarray:
