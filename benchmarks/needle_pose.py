@@ -97,9 +97,29 @@ def _errors(T_est: np.ndarray, T_true: np.ndarray) -> tuple[float, float, float]
     return pos, ang, task1
 
 
+def _reason_kind(reason: str) -> str:
+    """A NeedleNotFound reason without its numbers, for counting refusals by kind."""
+    for kind in (
+        "misses the needle's outline",
+        "too few needle-coloured pixels",
+        "sees no needle",
+        "mm from the camera",
+        "every start failed",
+        "too few needle edge points",
+    ):
+        if kind in reason:
+            return kind
+    return reason
+
+
 def _summary(rows: list[dict]) -> dict:
     est = [r for r in rows if r["found"]]
-    out = {"scenes": len(rows), "not_found": len(rows) - len(est)}
+    reasons: dict[str, int] = {}
+    for r in rows:
+        if not r["found"]:
+            key = _reason_kind(r["reason"])
+            reasons[key] = reasons.get(key, 0) + 1
+    out = {"scenes": len(rows), "not_found": len(rows) - len(est), "not_found_reasons": reasons}
     if not est:
         return out | {"success_rate": 0.0}
     pos = np.array([r["pos_mm"] for r in est])
