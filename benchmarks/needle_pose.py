@@ -2,12 +2,12 @@
 
 Scenes use a seed never used for training (training data: seed 1). The needle rests on the
 tissue (SRC Task 1), is free in view, held in a jaw or partly inserted in a port, 80-200 mm from
-the cameras where the scene allows it. Two conditions:
-``unoccluded`` (≥ 97 % of the needle's pixels visible) and ``occluded`` (an arm placed between
-the camera and the needle; 40-90 % of the needle's pixels visible in the left image). Errors: position = distance between estimated and true arc
-centres; angle = geodesic angle; task1 = SRC base + mid + tip distances. Failures to find the
-needle count as failures (success needs < 2 mm and < 5°); error means are over the scenes with
-an estimate, and ``not_found`` says how many had none.
+the cameras where the scene allows it. Two conditions: ``unoccluded`` (≥ 97 % of the needle's
+pixels visible) and ``occluded`` (an arm placed between the camera and the needle; 40-90 % of
+the needle's pixels visible in the left image). Errors: position = distance between estimated
+and true arc centres; angle = geodesic angle; task1 = SRC base + mid + tip distances. Failures
+to find the needle count as failures (success needs < 2 mm and < 5°); error means are over the
+scenes with an estimate, and ``not_found`` says how many had none.
 
     python benchmarks/needle_pose.py [--json PATH] [--n 200] [--resolution 1920x1080]
 """
