@@ -1,8 +1,9 @@
 """Multi-task needle CNN: shared encoder, needle-mask head, base/tip keypoint heatmap heads.
 
-A small U-Net (about 0.2 M parameters) that runs on a downsampled image (default 480×272).
+A small U-Net (128 k parameters, 0.5 MB) that runs on a downsampled image (default 480×272).
 Outputs at half the input resolution: channel 0 the coarse needle-mask logit, channel 1 a
-heatmap of both needle ends (the rendered ends look alike), channel 2 a heatmap of the base.
+heatmap of both needle ends (found even where the base band is hidden), channel 2 a heatmap
+of the base.
 Peaks are decoded to sub-pixel positions (:func:`decode_ends`).
 Weights load with ``torch.load(weights_only=True)``; a missing or mismatched file raises
 :class:`WeightsError` naming the file.
