@@ -50,3 +50,12 @@ def test_only_occluded_ends_are_extended_along_the_chord():
         assert np.allclose(ha, a) and np.allclose(hb, b + k * (b - a))
     assert extended_ends((a, b), (False, False)) == []
     assert len(extended_ends((a, b), (True, True))) == 2 * len(EXTENSIONS)
+
+
+def test_end_on_the_tissue_silhouette_is_occluded_but_an_end_on_open_tissue_is_not():
+    """The ridge hides the needle: its end sits where lit tissue meets the dark cavity."""
+    img, view = _image_with_jaw()
+    img[80:120, 203:240] = PINK  # no jaw
+    img[:, :100] = BLACK  # cavity left of x=100: the left end lies on the tissue's silhouette
+    assert end_is_occluded(img, view, np.array([100.0, 100.0]), 6.0, RULE)
+    assert not end_is_occluded(img, view, np.array([200.0, 100.0]), 6.0, RULE)

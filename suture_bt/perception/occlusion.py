@@ -2,9 +2,10 @@
 
 The fit's one-sided objective explains every visible edge equally well with the needle ending
 at the occluder (seen more end-on) or continuing behind it, and the fit started from the visible
-ends finds the first. So a visible end that touches grey, non-needle pixels (a jaw or shaft) or
-the image border is flagged, and the fit is re-started with that end pushed on behind the
-occluder; the lower edge cost wins.
+ends finds the first. So a visible end that touches grey, non-needle pixels (a jaw or shaft),
+the image border or the tissue's silhouette (lit tissue and the dark cavity both near the end:
+the ridge hides a needle behind it) is flagged, and the fit is re-started with that end pushed
+on behind the occluder; the lower edge cost wins.
 """
 
 from __future__ import annotations
@@ -16,6 +17,11 @@ from suture_bt.perception.pose_fit import MaskView
 
 #: Extensions (fractions of the visible chord) tried for an occluded end.
 EXTENSIONS = (0.35, 0.7)
+#: Least share of an end's neighbourhood that must be lit tissue, and dark cavity, for the end
+#: to sit on the tissue's silhouette.
+SILHOUETTE_SHARE = 0.1
+#: Tissue: red above blue by this much (8-bit levels); cavity: level below the needle's floor.
+TISSUE_RED_MINUS_BLUE = 30.0
 
 
 def needle_coloured(rgb: np.ndarray, rule: ColourRule) -> np.ndarray:
@@ -28,8 +34,8 @@ def needle_coloured(rgb: np.ndarray, rule: ColourRule) -> np.ndarray:
 def end_is_occluded(
     rgb: np.ndarray, view: MaskView, uv: np.ndarray, radius: float, rule: ColourRule
 ) -> bool:
-    """True when grey pixels that are not in the needle mask, or the image border, lie within
-    ``radius`` px of the end pixel ``uv``."""
+    """True when grey pixels that are not in the needle mask, the image border or the tissue's
+    silhouette lie within ``radius`` px of the end pixel ``uv``."""
     H, W = rgb.shape[:2]
     u, v = float(uv[0]), float(uv[1])
     r = int(np.ceil(radius))
@@ -46,7 +52,15 @@ def end_is_occluded(
         mask[mc + y0 - c : md + y0 - c, ma + x0 - a : mb + x0 - a] = view.mask[mc:md, ma:mb]
     yy, xx = np.mgrid[c:d, a:b]
     near = (xx - u) ** 2 + (yy - v) ** 2 <= radius**2
-    return bool(np.any(grey & ~mask & near))
+    if np.any(grey & ~mask & near):
+        return True
+    c16 = rgb[c:d, a:b].astype(np.int16)
+    level = c16.sum(-1) / 3.0
+    tissue = (c16[..., 0] - c16[..., 2] >= TISSUE_RED_MINUS_BLUE) & (level >= rule.min_level)
+    cavity = level < rule.min_level
+    n = max(int(near.sum()), 1)
+    share = min((tissue & near).sum(), (cavity & near & ~mask).sum()) / n
+    return bool(share >= SILHOUETTE_SHARE)
 
 
 def extended_ends(
