@@ -79,3 +79,14 @@ def test_empty_coarse_mask_gives_empty_view():
     img, _ = _scene()
     view = refine_mask(img, np.zeros((135, 240), bool), 4.0)
     assert view.mask.size == 0
+
+
+def test_coarse_blobs_farther_than_the_gap_are_dropped_near_ones_kept():
+    prob = np.zeros((100, 200), np.float32)
+    prob[40:44, 20:60] = 1.0  # the needle's larger piece
+    prob[40:44, 70:85] = 1.0  # a piece beyond a 10 px occluder
+    prob[90:94, 170:190] = 1.0  # another instrument's tip, far away
+    everything = coarse_components(prob)
+    assert everything[91, 180] and everything[41, 75]
+    near = coarse_components(prob, max_gap=30.0)
+    assert near[41, 30] and near[41, 75] and not near[91, 180]

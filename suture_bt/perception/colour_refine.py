@@ -27,15 +27,26 @@ class ColourRule:
     min_component_px: int = 4
 
 
-def coarse_components(prob: np.ndarray, threshold: float = 0.5, keep_ratio: float = 0.15):
+def coarse_components(
+    prob: np.ndarray,
+    threshold: float = 0.5,
+    keep_ratio: float = 0.15,
+    max_gap: float | None = None,
+):
     """Binary coarse mask keeping the largest blob and blobs ≥ keep_ratio of it (occlusion
-    splits a needle into pieces); empty when nothing passes the threshold."""
+    splits a needle into pieces) that lie within ``max_gap`` px of it (pieces of one needle
+    are never farther apart than its chord: a far blob is another instrument's tip); empty
+    when nothing passes the threshold."""
     m = (prob > threshold).astype(np.uint8)
     n, lab, stats, _ = cv2.connectedComponentsWithStats(m, connectivity=8)
     if n <= 1:
         return np.zeros_like(m, bool)
     areas = stats[1:, cv2.CC_STAT_AREA]
     keep = 1 + np.nonzero(areas >= keep_ratio * areas.max())[0]
+    if max_gap is not None and len(keep) > 1:
+        largest = 1 + int(np.argmax(areas))
+        dist = cv2.distanceTransform((lab != largest).astype(np.uint8), cv2.DIST_L2, 3)
+        keep = [k for k in keep if k == largest or dist[lab == k].min() <= max_gap]
     return np.isin(lab, keep)
 
 

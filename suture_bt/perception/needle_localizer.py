@@ -234,11 +234,14 @@ class NeedleLocalizer:
         the nearest working distance. A keypoint depth the masks contradict is not used as
         the fit's hint.
         """
+        # Pieces of one needle lie within its chord of each other, at the nearest distance.
+        chord = float(np.linalg.norm(self.model.base - self.model.tip))
+        max_gap = chord * self.stereo.left.fx / MIN_DEPTH / scale
         raw = []
         for eye, img in enumerate(images):
             name = ("left", "right")[eye]
             h = int(round(img.shape[0] / scale))
-            coarse = coarse_components(prob[eye][:h], self.coarse_threshold)
+            coarse = coarse_components(prob[eye][:h], self.coarse_threshold, max_gap=max_gap)
             if coarse.sum() == 0:
                 raise NeedleNotFound(f"the network sees no needle in the {name} image")
             raw.append(refine_mask(img, coarse, scale, self.rule))
