@@ -90,3 +90,13 @@ def test_coarse_blobs_farther_than_the_gap_are_dropped_near_ones_kept():
     assert everything[91, 180] and everything[41, 75]
     near = coarse_components(prob, max_gap=30.0)
     assert near[41, 30] and near[41, 75] and not near[91, 180]
+
+
+def test_the_blob_at_the_keypoints_is_the_needle_even_when_a_jaw_is_larger():
+    prob = np.zeros((100, 200), np.float32)
+    prob[40:44, 20:50] = 1.0  # the needle
+    prob[80:95, 150:190] = 1.0  # a larger jaw, far away
+    jaw = coarse_components(prob, max_gap=30.0)
+    assert jaw[90, 170] and not jaw[41, 30]
+    needle = coarse_components(prob, max_gap=30.0, anchors=np.array([[21.0, 42.0], [48.0, 41.0]]))
+    assert needle[41, 30] and not needle[90, 170]

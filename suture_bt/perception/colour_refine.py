@@ -32,21 +32,31 @@ def coarse_components(
     threshold: float = 0.5,
     keep_ratio: float = 0.15,
     max_gap: float | None = None,
+    anchors: np.ndarray | None = None,
 ):
-    """Binary coarse mask keeping the largest blob and blobs ≥ keep_ratio of it (occlusion
-    splits a needle into pieces) that lie within ``max_gap`` px of it (pieces of one needle
-    are never farther apart than its chord: a far blob is another instrument's tip); empty
-    when nothing passes the threshold."""
+    """Binary coarse mask: the needle's blob and pieces of it that occluders split off.
+
+    The needle's blob is the one nearest the ``anchors`` (the network's end keypoints, in
+    coarse px), else the largest; pieces are blobs ≥ ``keep_ratio`` of its area within
+    ``max_gap`` px of it (pieces of one needle are never farther apart than its chord: a far
+    blob is another instrument's tip). Empty when nothing passes the threshold.
+    """
     m = (prob > threshold).astype(np.uint8)
     n, lab, stats, _ = cv2.connectedComponentsWithStats(m, connectivity=8)
     if n <= 1:
         return np.zeros_like(m, bool)
     areas = stats[1:, cv2.CC_STAT_AREA]
-    keep = 1 + np.nonzero(areas >= keep_ratio * areas.max())[0]
+    main = 1 + int(np.argmax(areas))
+    if anchors is not None and len(anchors):
+        ys, xs = np.nonzero(lab)
+        d = np.hypot(xs[:, None] - anchors[None, :, 0], ys[:, None] - anchors[None, :, 1])
+        near = np.full((n, len(anchors)), np.inf)
+        np.minimum.at(near, lab[ys, xs], d)
+        main = 1 + int(np.argmin(near[1:].sum(1)))
+    keep = 1 + np.nonzero(areas >= keep_ratio * areas[main - 1])[0]
     if max_gap is not None and len(keep) > 1:
-        largest = 1 + int(np.argmax(areas))
-        dist = cv2.distanceTransform((lab != largest).astype(np.uint8), cv2.DIST_L2, 3)
-        keep = [k for k in keep if k == largest or dist[lab == k].min() <= max_gap]
+        dist = cv2.distanceTransform((lab != main).astype(np.uint8), cv2.DIST_L2, 3)
+        keep = [k for k in keep if k == main or dist[lab == k].min() <= max_gap]
     return np.isin(lab, keep)
 
 

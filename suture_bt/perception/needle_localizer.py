@@ -189,14 +189,16 @@ class NeedleLocalizer:
         prob, kp, score, scale = self.network(left, right)
         t1 = time.perf_counter()
         ends, depth = self._ends_and_depth(kp, score)
+        # The needle's coarse blob is the one at the trusted end keypoints (coarse px).
+        anchors = [(kp[e][score[e] >= MIN_KEYPOINT_SCORE] + 0.5) / scale - 0.5 for e in (0, 1)]
         try:
-            views, half_width, depth = self._masks((left, right), prob, scale, depth)
+            views, half_width, depth = self._masks((left, right), prob, scale, depth, anchors)
         except NeedleNotFound:
             if depth is None:
                 raise
             # A wrong disparity depth makes the wire look thicker than it can be (a needle seen
             # edge-on folds onto itself): drop the hint and gate at the nearest working distance.
-            views, half_width, depth = self._masks((left, right), prob, scale, None)
+            views, half_width, depth = self._masks((left, right), prob, scale, None, anchors)
         t2 = time.perf_counter()
         fit = self._fit(left, views, ends, depth, half_width, previous)
         t3 = time.perf_counter()
@@ -225,7 +227,7 @@ class NeedleLocalizer:
             masks=(views[0], views[1]),
         )
 
-    def _masks(self, images, prob, scale, depth):
+    def _masks(self, images, prob, scale, depth, anchors=(None, None)):
         """Both eyes' refined needle masks, the depth hint for the fit and the gate (px).
 
         Blobs touching the needle that are thicker than the widest plausible wire (jaws,
@@ -241,7 +243,9 @@ class NeedleLocalizer:
         for eye, img in enumerate(images):
             name = ("left", "right")[eye]
             h = int(round(img.shape[0] / scale))
-            coarse = coarse_components(prob[eye][:h], self.coarse_threshold, max_gap=max_gap)
+            coarse = coarse_components(
+                prob[eye][:h], self.coarse_threshold, max_gap=max_gap, anchors=anchors[eye]
+            )
             if coarse.sum() == 0:
                 raise NeedleNotFound(f"the network sees no needle in the {name} image")
             raw.append(refine_mask(img, coarse, scale, self.rule))
