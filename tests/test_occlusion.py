@@ -8,6 +8,7 @@ from suture_bt.perception.occlusion import (
     end_is_occluded,
     extended_ends,
     needle_coloured,
+    with_occluder,
 )
 from suture_bt.perception.pose_fit import MaskView
 
@@ -59,3 +60,12 @@ def test_end_on_the_tissue_silhouette_is_occluded_but_an_end_on_open_tissue_is_n
     img[:, :100] = BLACK  # cavity left of x=100: the left end lies on the tissue's silhouette
     assert end_is_occluded(img, view, np.array([100.0, 100.0]), 6.0, RULE)
     assert not end_is_occluded(img, view, np.array([200.0, 100.0]), 6.0, RULE)
+
+
+def test_occluder_marks_the_jaw_beside_the_mask_not_the_tissue():
+    img, view = _image_with_jaw()
+    occ = with_occluder(img, view, RULE).occluder
+    x0, y0 = view.origin
+    assert occ[100 - y0, 203 - x0] and occ[100 - y0, 202 - x0]  # jaw and the gap pixel next to it
+    assert not occ[view.mask].any()
+    assert not occ[100 - y0, 95 - x0]  # tissue left of the wire

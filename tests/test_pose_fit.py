@@ -50,6 +50,17 @@ def test_edge_points_are_pixel_midpoints_in_image_coordinates():
     assert {tuple(p) for p in pts} == expected
 
 
+def test_edge_points_where_the_mask_meets_an_occluder_are_left_out():
+    m = np.zeros((6, 8), bool)
+    m[2:4, 1:5] = True  # a 2×4 block; an occluder column right of it
+    occ = np.zeros_like(m)
+    occ[:, 5] = True
+    all_pts = edge_points(MaskView(m, (0, 0)))
+    cut = edge_points(MaskView(m, (0, 0), occluder=occ))
+    assert len(all_pts) - len(cut) == 2  # the two pairs across the block's right side
+    assert not np.any(np.isclose(cut[:, 0], 4.5))
+
+
 @pytest.mark.parametrize("seed", [1, 2, 3])
 def test_fit_recovers_known_pose_at_1080p(seed):
     st = stereo(1920, 1080)

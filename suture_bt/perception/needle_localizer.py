@@ -40,7 +40,7 @@ from suture_bt.perception.network import (
     for_inference,
     load_network,
 )
-from suture_bt.perception.occlusion import end_is_occluded, extended_ends
+from suture_bt.perception.occlusion import end_is_occluded, extended_ends, with_occluder
 from suture_bt.perception.pose_fit import (
     MaskView,
     NeedleNotFound,
@@ -267,6 +267,7 @@ class NeedleLocalizer:
                     f"too few needle-coloured pixels in the {('left', 'right')[eye]} image "
                     f"({int(view.mask.sum())} < {MIN_NEEDLE_PIXELS})"
                 )
+            view = with_occluder(img, view, self.rule)
             if self.use_free_space:
                 dt, org = free_space_dt(img, view)
                 view = MaskView(view.mask, view.origin, dt, org)

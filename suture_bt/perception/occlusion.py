@@ -10,6 +10,7 @@ on behind the occluder; the lower edge cost wins.
 
 from __future__ import annotations
 
+import cv2
 import numpy as np
 
 from suture_bt.perception.colour_refine import ColourRule
@@ -76,3 +77,15 @@ def extended_ends(
         if occluded[1]:
             out.append((a, b + k * chord))
     return out
+
+
+def with_occluder(rgb: np.ndarray, view: MaskView, rule: ColourRule) -> MaskView:
+    """The view with its occluder marked: grey non-needle pixels and their neighbours (a jaw
+    or shaft in front), so the fit ignores the mask's boundary where they cut the needle."""
+    x0, y0 = view.origin
+    h, w = view.mask.shape
+    if h == 0 or w == 0:
+        return view
+    grey = needle_coloured(rgb[y0 : y0 + h, x0 : x0 + w], rule) & ~view.mask
+    near = cv2.dilate(grey.astype(np.uint8), np.ones((3, 3), np.uint8)).astype(bool)
+    return MaskView(view.mask, view.origin, view.free_dt, view.free_origin, near & ~view.mask)
