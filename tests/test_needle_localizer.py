@@ -93,3 +93,24 @@ def test_keypoint_depth_contradicted_by_the_masks_neither_gates_nor_hints():
     # Agreeing depths are kept as the fit's hint.
     _, _, depth = loc._masks((left, right), prob, 4.0, 0.105)
     assert depth == 0.105
+
+
+def test_masks_mark_the_occluder_and_keep_it_with_the_free_space_term():
+    """A grey jaw touching the wire is marked as occluder in both modes (its boundary with
+    the needle is no outline), and the free-space term does not discard that mark."""
+    for free in (False, True):
+        loc = NeedleLocalizer(stereo(1920, 1080), net=_eager_net(), use_free_space=free)
+        d = round(loc.stereo.left.fx * loc.stereo.baseline / 0.1)  # disparity at 0.1 m
+        images = []
+        for shift in (0, d):
+            img = np.zeros((1080, 1920, 3), np.uint8)
+            img[:] = (215, 140, 132)
+            img[500:506, 900 - shift : 1000 - shift] = (160, 160, 168)  # the wire
+            img[480:526, 1000 - shift : 1040 - shift] = (190, 190, 196)  # a thick jaw at its end
+            images.append(img)
+        prob = np.ones((2, 270, 480), np.float32)
+        views, _, _ = loc._masks(tuple(images), prob, 4.0, 0.1)
+        v = views[0]
+        assert v.occluder is not None and v.occluder.any()
+        assert not (v.occluder & v.mask).any()
+        assert (v.free_dt is not None) == free

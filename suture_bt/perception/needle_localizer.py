@@ -14,7 +14,7 @@ from __future__ import annotations
 
 import os
 import time
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 
 import cv2
 import numpy as np
@@ -234,7 +234,8 @@ class NeedleLocalizer:
         shaft) are dropped. That width comes from the nearer of the keypoints' and the masks'
         stereo depths (a wrong depth must not make the gate thinner than the wire), else from
         the nearest working distance. A keypoint depth the masks contradict is not used as
-        the fit's hint.
+        the fit's hint. ``anchors`` are each eye's trusted end keypoints in coarse px
+        (None: the largest coarse blob is the needle).
         """
         # Pieces of one needle lie within its chord of each other, at the nearest distance.
         chord = float(np.linalg.norm(self.model.base - self.model.tip))
@@ -270,7 +271,7 @@ class NeedleLocalizer:
             view = with_occluder(img, view, self.rule)
             if self.use_free_space:
                 dt, org = free_space_dt(img, view)
-                view = MaskView(view.mask, view.origin, dt, org)
+                view = replace(view, free_dt=dt, free_origin=org)
             views.append(view)
         return views, half_width, depth
 

@@ -10,6 +10,8 @@ on behind the occluder; the lower edge cost wins.
 
 from __future__ import annotations
 
+from dataclasses import replace
+
 import cv2
 import numpy as np
 
@@ -88,4 +90,4 @@ def with_occluder(rgb: np.ndarray, view: MaskView, rule: ColourRule) -> MaskView
         return view
     grey = needle_coloured(rgb[y0 : y0 + h, x0 : x0 + w], rule) & ~view.mask
     near = cv2.dilate(grey.astype(np.uint8), np.ones((3, 3), np.uint8)).astype(bool)
-    return MaskView(view.mask, view.origin, view.free_dt, view.free_origin, near & ~view.mask)
+    return replace(view, occluder=near & ~view.mask)
