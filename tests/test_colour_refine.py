@@ -5,7 +5,13 @@ import numpy as np
 from perception_helpers import stereo
 
 from suture_bt.geometry import NeedleModel
-from suture_bt.perception.colour_refine import coarse_components, refine_mask, remove_thick
+from suture_bt.perception.colour_refine import (
+    ColourRule,
+    coarse_components,
+    needle_coloured,
+    refine_mask,
+    remove_thick,
+)
 from suture_bt.perception.needle_projection import rasterize_needle
 
 
@@ -100,3 +106,9 @@ def test_the_blob_at_the_keypoints_is_the_needle_even_when_a_jaw_is_larger():
     assert jaw[90, 170] and not jaw[41, 30]
     needle = coarse_components(prob, max_gap=30.0, anchors=np.array([[21.0, 42.0], [48.0, 41.0]]))
     assert needle[41, 30] and not needle[90, 170]
+
+
+def test_colour_test_passes_grey_metal_only():
+    pink, grey, black, white = (215, 140, 132), (158, 161, 168), (20, 10, 10), (255, 255, 255)
+    px = np.array([[pink, grey, black, white]], np.uint8)
+    assert needle_coloured(px, ColourRule())[0].tolist() == [False, True, False, True]

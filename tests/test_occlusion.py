@@ -7,7 +7,6 @@ from suture_bt.perception.occlusion import (
     EXTENSIONS,
     end_is_occluded,
     extended_ends,
-    needle_coloured,
     with_occluder,
 )
 from suture_bt.perception.pose_fit import MaskView
@@ -25,11 +24,6 @@ def _image_with_jaw():
     img[mask] = GREY
     img[80:120, 203:240] = GREY  # the jaw: grey but not needle
     return img, MaskView(mask[90:110, 90:210], (90, 90))
-
-
-def test_colour_test_passes_grey_metal_only():
-    px = np.array([[PINK, GREY, BLACK, (255, 255, 255)]], np.uint8)
-    assert needle_coloured(px, RULE)[0].tolist() == [False, True, False, True]
 
 
 def test_end_next_to_a_jaw_is_occluded_and_the_free_end_is_not():

@@ -27,6 +27,13 @@ class ColourRule:
     min_component_px: int = 4
 
 
+def needle_coloured(rgb: np.ndarray, rule: ColourRule) -> np.ndarray:
+    """Pixels passing the needle colour test (grey metal: the needle and the instruments)."""
+    c = rgb.astype(np.int16)
+    level = c.sum(-1) / 3.0
+    return (c[..., 2] - c[..., 0] >= rule.min_blue_minus_red) & (level >= rule.min_level)
+
+
 def coarse_components(
     prob: np.ndarray,
     threshold: float = 0.5,
@@ -111,15 +118,13 @@ def refine_mask(
     x1 = int(min(np.ceil((xs.max() + 1) * scale + pad), W))
     y0 = int(max(np.floor(ys.min() * scale - pad), 0))
     y1 = int(min(np.ceil((ys.max() + 1) * scale + pad), H))
-    crop = rgb[y0:y1, x0:x1].astype(np.int16)
     # Coarse mask resampled onto the crop's pixel grid, then dilated by the band.
     gx = ((np.arange(x0, x1) + 0.5) / scale - 0.5).round().astype(int).clip(0, coarse.shape[1] - 1)
     gy = ((np.arange(y0, y1) + 0.5) / scale - 0.5).round().astype(int).clip(0, coarse.shape[0] - 1)
     gate = coarse[np.ix_(gy, gx)].astype(np.uint8)
     k = 2 * rule.band_px + 1
     gate = cv2.dilate(gate, cv2.getStructuringElement(cv2.MORPH_ELLIPSE, (k, k))) > 0
-    level = crop.sum(-1) / 3.0
-    needle = (crop[..., 2] - crop[..., 0] >= rule.min_blue_minus_red) & (level >= rule.min_level)
+    needle = needle_coloured(rgb[y0:y1, x0:x1], rule)
     return drop_thick(MaskView(needle & gate, (x0, y0)), max_half_width_px, rule)
 
 
@@ -154,8 +159,5 @@ def free_space_dt(
     mx, my = int(margin * max(w, h)) + 4, int(margin * max(w, h)) + 4
     a, b = max(x0 - mx, 0), min(x0 + w + mx, W)
     c, d = max(y0 - my, 0), min(y0 + h + my, H)
-    crop = rgb[c:d, a:b].astype(np.int16)
-    level = crop.sum(-1) / 3.0
-    grey = (crop[..., 2] - crop[..., 0] >= rule.min_blue_minus_red) & (level >= rule.min_level)
-    free = (~grey).astype(np.uint8)
+    free = (~needle_coloured(rgb[c:d, a:b], rule)).astype(np.uint8)
     return cv2.distanceTransform(free, cv2.DIST_L2, 3), (a, c)

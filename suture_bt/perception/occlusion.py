@@ -15,7 +15,7 @@ from dataclasses import replace
 import cv2
 import numpy as np
 
-from suture_bt.perception.colour_refine import ColourRule
+from suture_bt.perception.colour_refine import ColourRule, needle_coloured
 from suture_bt.perception.pose_fit import MaskView
 
 #: Extensions (fractions of the visible chord) tried for an occluded end.
@@ -25,13 +25,6 @@ EXTENSIONS = (0.35, 0.7)
 SILHOUETTE_SHARE = 0.1
 #: Tissue: red above blue by this much (8-bit levels); cavity: level below the needle's floor.
 TISSUE_RED_MINUS_BLUE = 30.0
-
-
-def needle_coloured(rgb: np.ndarray, rule: ColourRule) -> np.ndarray:
-    """Pixels passing the needle colour test (grey metal: the needle and the instruments)."""
-    c = rgb.astype(np.int16)
-    level = c.sum(-1) / 3.0
-    return (c[..., 2] - c[..., 0] >= rule.min_blue_minus_red) & (level >= rule.min_level)
 
 
 def end_is_occluded(
