@@ -11,7 +11,13 @@ from suture_bt.perception.needle_projection import (
     rasterize_needle,
     transform_points,
 )
-from suture_bt.perception.pose_fit import MaskView, NeedleNotFound, PoseFitter, edge_points
+from suture_bt.perception.pose_fit import (
+    DISTINCT,
+    MaskView,
+    NeedleNotFound,
+    PoseFitter,
+    edge_points,
+)
 from suture_bt.transforms import invert
 
 MODEL = NeedleModel()
@@ -88,6 +94,31 @@ def test_fit_tolerates_occlusion_of_a_third_of_the_needle():
     res = PoseFitter(st, MODEL).fit(*occluded, tuple(ends))
     pos, ang = pose_errors(res.T_cam_needle, T)
     assert pos < 1.0 and ang < 3.0
+
+
+@pytest.mark.parametrize("n_final", [2, 3])
+def test_final_candidates_are_clearly_different_solutions(n_final):
+    """The polished finals are the best start and the next ones > DISTINCT away from it; the
+    reported ambiguity is the cost gap to the nearest of them."""
+    st, T, left, right, ends = _scene_1080p(5, 2.0)
+    res = PoseFitter(st, MODEL, n_final=n_final).fit(left, right, tuple(ends))
+    assert 2 <= len(res.candidates) <= n_final
+    for i, a in enumerate(res.candidates):
+        for b in res.candidates[i + 1 :]:
+            assert pose_errors(a, b)[1] > np.degrees(DISTINCT)
+    assert res.ambiguity >= 0.0
+    pos, ang = pose_errors(res.T_cam_needle, T)
+    assert pos < 0.5 and ang < 1.5
+
+
+def test_pruning_to_one_second_stage_start_still_recovers_the_pose():
+    """The cheap first stage ranks the starts well enough that keeping its best one works on
+    a clean mask (the default keeps several for occluded needles)."""
+    st, T, left, right, ends = _scene_1080p(8, 2.0)
+    res = PoseFitter(st, MODEL, n_second_stage=1).fit(left, right, tuple(ends))
+    assert len(res.candidates) == 1 and res.ambiguity == float("inf")
+    pos, ang = pose_errors(res.T_cam_needle, T)
+    assert pos < 0.5 and ang < 1.5
 
 
 def test_warm_start_converges_without_end_points():

@@ -32,6 +32,8 @@ from suture_bt.transforms import invert
 
 #: Finite-difference steps of the six parameters (px, px, px, px, rad, rad).
 FD_STEPS = np.array([0.02, 0.02, 0.02, 0.02, 2e-5, 2e-4])
+#: Rotation (rad) beyond which two fitted poses count as different solutions.
+DISTINCT = np.deg2rad(10.0)
 #: Samples of the arc angle for the nearest-point search before Newton polishing.
 N_THETA_GRID = 24
 
@@ -356,13 +358,19 @@ class PoseFitter:
     max_points_per_eye: int = 1200
     coarse_points_per_eye: int = 60
     mid_points_per_eye: int = 200
-    n_keep: int = 6
-    n_keep_alternative: int = 3
+    n_keep: int = 12
+    n_keep_alternative: int = 6
     min_edge_points: int = 12
     seed: int = 0
-    #: LM iterations: all kept starts (σ = 3 px, then 1 px) on a subsample, then the best two
-    #: on every edge point.
+    #: LM iterations: all kept starts at σ = 3 px on the coarse subsample, the best
+    #: ``n_second_stage`` at σ = 1 px on the mid one, then the best ``n_final`` clearly
+    #: different solutions on every edge point. Many cheap first-stage starts find the right
+    #: basin more often than few expensive ones (1080p occluded benchmark: success 0.465 ->
+    #: 0.515 at 134 -> 127 ms).
     iterations: tuple[int, int, int] = (10, 10, 8)
+    n_second_stage: int = 8
+    #: Clearly different solutions (> DISTINCT apart) polished on every edge point.
+    n_final: int = 2
     #: Working distance (m) of the arc centre from the left camera: fits outside are rejected
     #: (a short visible piece is also explained by a much nearer, larger-looking needle).
     depth_range: tuple[float, float] = (0.03, 0.5)
@@ -426,7 +434,9 @@ class PoseFitter:
         if not len(starts):
             raise NeedleNotFound("no feasible pose hypothesis from the needle's end points")
         it1, it2, it3 = self.iterations
-        x, _ = levenberg_marquardt(starts, mid, self.stereo, self.model, it1, 3.0, free)
+        x, c1 = levenberg_marquardt(starts, coarse, self.stereo, self.model, it1, 3.0, free)
+        if self.n_second_stage and len(x) > self.n_second_stage:
+            x = x[np.argsort(c1)[: self.n_second_stage]]
         x, c = levenberg_marquardt(x, mid, self.stereo, self.model, it2, 1.0, free)
         c = np.where(self._in_range(x), c, np.inf)
         if not np.isfinite(c).any():
@@ -436,13 +446,13 @@ class PoseFitter:
             )
         order = np.argsort(c)
         T_mid = params_to_pose(x[order], cam, self.model)
-        finals = [order[0]]
+        finals, kept = [order[0]], [0]
         for j, k in enumerate(order[1:], 1):
-            if np.isfinite(c[k]) and _rot_angle(T_mid[0, :3, :3], T_mid[j, :3, :3]) > np.deg2rad(
-                10
-            ):
-                finals.append(k)
+            if len(finals) == self.n_final or not np.isfinite(c[k]):
                 break
+            if all(_rot_angle(T_mid[i, :3, :3], T_mid[j, :3, :3]) > DISTINCT for i in kept):
+                finals.append(k)
+                kept.append(j)
         xf, cf = levenberg_marquardt(x[finals], rays, self.stereo, self.model, it3, 1.0, free)
         cf = np.where(self._in_range(xf), cf, np.inf)
         if not np.isfinite(cf).any():
@@ -453,7 +463,7 @@ class PoseFitter:
         r = r[0]
         inl = np.abs(r) < 1.5
         rms = float(np.sqrt(np.mean(r[inl] ** 2))) if inl.any() else float("inf")
-        amb = float(cf[1 - b] - cf[b]) if len(cf) == 2 else float("inf")
+        amb = float(np.min(np.delete(cf, b)) - cf[b]) if len(cf) > 1 else float("inf")
         return PoseFitResult(
             T_cam_needle=T,
             T_world_needle=cam.T_world_cam @ T,
