@@ -5,6 +5,7 @@ import numpy as np
 from suture_bt.perception.colour_refine import ColourRule
 from suture_bt.perception.occlusion import (
     EXTENSIONS,
+    anchored_ends,
     end_is_occluded,
     extended_ends,
     with_occluder,
@@ -45,6 +46,17 @@ def test_only_occluded_ends_are_extended_along_the_chord():
         assert np.allclose(ha, a) and np.allclose(hb, b + k * (b - a))
     assert extended_ends((a, b), (False, False)) == []
     assert len(extended_ends((a, b), (True, True))) == 2 * len(EXTENSIONS)
+
+
+def test_anchored_end_pairs_the_keypoint_with_the_visible_pieces_far_end():
+    """A confident keypoint at one end of the wire (x 100-200): the other end of the pair is
+    the mask's far edge, whichever end the keypoint names."""
+    _, view = _image_with_jaw()
+    kp = np.array([100.2, 100.4])
+    base, tip = anchored_ends(kp, True, view)
+    assert np.allclose(base, kp) and abs(tip[0] - 200.5) < 1.0 and abs(tip[1] - 100) < 3
+    base2, tip2 = anchored_ends(kp, False, view)
+    assert np.allclose(tip2, kp) and np.allclose(base2, tip)
 
 
 def test_end_on_the_tissue_silhouette_is_occluded_but_an_end_on_open_tissue_is_not():

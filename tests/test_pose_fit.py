@@ -13,10 +13,13 @@ from suture_bt.perception.needle_projection import (
 )
 from suture_bt.perception.pose_fit import (
     DISTINCT,
+    END_PRIOR_SHARE,
+    EndPriorTerm,
     MaskView,
     NeedleNotFound,
     PoseFitter,
     edge_points,
+    mask_ends,
 )
 from suture_bt.transforms import invert
 
@@ -188,3 +191,71 @@ def test_mask_ends_are_the_visible_arcs_extremes():
     assert d < 12.0  # within the wire's cap and the edge sampling
     with pytest.raises(NeedleNotFound):
         mask_ends(MaskView(np.zeros((10, 10), bool)))
+
+
+def _right_ends(st, T):
+    T_lr = invert(st.left.T_world_cam) @ st.right.T_world_cam
+    return project_cam(
+        st.right, transform_points(invert(T_lr) @ T, np.stack([MODEL.base, MODEL.tip]))
+    )
+
+
+def test_end_prior_is_zero_at_either_projected_end_and_weighs_its_share():
+    st, T, left, right, ends = _scene_1080p(4, 0.0)
+    er = _right_ends(st, T)
+    # The left eye sees the base keypoint, the right eye the tip's: either model end may match.
+    term = EndPriorTerm(st, MODEL, (ends[:1], er[1:]))
+    moved = T.copy()
+    moved[:3, 3] += (0.002, 0.0, 0.0)
+    r = term(np.stack([T, moved]))
+    assert r.shape == (2, 2)
+    np.testing.assert_allclose(r[0], 0.0, atol=1e-6)
+    assert np.all(r[1] > 5.0)  # 2 mm at ~0.1 m is ~16 px
+    np.testing.assert_allclose(term.column_weights(500).sum(), END_PRIOR_SHARE * 500)
+    assert not EndPriorTerm(st, MODEL, (np.zeros((0, 2)), np.zeros((0, 2))))
+
+
+def _tip_hidden(st, T, left, right, ends):
+    """Both eyes' masks with a disc over the tip half (an occluder), and the left hypothesis
+    that stops short: base keypoint and the visible piece's far end."""
+    er = _right_ends(st, T)
+    occ = []
+    for v, e in ((left, ends), (right, er)):
+        m = v.mask.copy()
+        c = e[1] - np.array(v.origin)
+        r = 0.55 * np.linalg.norm(e[1] - e[0])
+        yy, xx = np.mgrid[: m.shape[0], : m.shape[1]]
+        m[(xx - c[0]) ** 2 + (yy - c[1]) ** 2 < r**2] = False
+        occ.append(MaskView(m, v.origin))
+    me = mask_ends(occ[0])
+    far = me[int(np.argmax([np.linalg.norm(p - ends[0]) for p in me]))]
+    return occ, (ends[0], far), er
+
+
+@pytest.mark.parametrize("seed", [3, 8])
+def test_end_priors_lead_the_search_to_a_hidden_end(seed):
+    """With the tip hidden and the fit started from the visible piece, confident keypoints
+    (here at the true ends in both eyes) bring the search to the right basin (for these seeds
+    the fit without them ends 40-56 deg off)."""
+    st, T, left, right, ends = _scene_1080p(seed, 0.0)
+    occ, short, er = _tip_hidden(st, T, left, right, ends)
+    res = PoseFitter(st, MODEL).fit(*occ, short, end_priors=(ends, er))
+    pos, ang = pose_errors(res.T_cam_needle, T)
+    assert pos < 1.0 and ang < 3.0
+
+
+def test_end_priors_do_not_bias_the_polished_pose(monkeypatch):
+    """Keypoints 12 px off both ends steer the search only: the finals are polished and
+    scored on the outline alone, so pose and cost match the fit without them (with the
+    prior in the polish its pull shows in the cost)."""
+    st, T, left, right, ends = _scene_1080p(2, 0.0)
+    off = np.array([[12.0, 0.0], [0.0, -12.0]])
+    priors = (ends + off, _right_ends(st, T) + off)
+    plain = PoseFitter(st, MODEL).fit(left, right, tuple(ends))
+    res = PoseFitter(st, MODEL).fit(left, right, tuple(ends), end_priors=priors)
+    pos, ang = pose_errors(res.T_cam_needle, plain.T_cam_needle)
+    assert pos < 0.02 and ang < 0.1
+    assert res.cost == pytest.approx(plain.cost, rel=0.02)
+    monkeypatch.setattr(EndPriorTerm, "polish", True)
+    pulled = PoseFitter(st, MODEL).fit(left, right, tuple(ends), end_priors=priors)
+    assert pulled.cost > 1.5 * plain.cost

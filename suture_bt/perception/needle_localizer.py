@@ -40,7 +40,12 @@ from suture_bt.perception.network import (
     for_inference,
     load_network,
 )
-from suture_bt.perception.occlusion import end_is_occluded, extended_ends, with_occluder
+from suture_bt.perception.occlusion import (
+    anchored_ends,
+    end_is_occluded,
+    extended_ends,
+    with_occluder,
+)
 from suture_bt.perception.pose_fit import (
     MaskView,
     NeedleNotFound,
@@ -51,6 +56,9 @@ from suture_bt.perception.pose_fit import (
 
 #: A keypoint heatmap peak below this probability is not trusted (the mask's ends are used).
 MIN_KEYPOINT_SCORE = 0.15
+#: A keypoint this confident anchors its end even when the other end's keypoint is weak
+#: (then the other end is sought at, and behind, the visible piece's far end).
+STRONG_KEYPOINT_SCORE = 0.5
 #: Fewest full-resolution needle pixels per eye to attempt a fit.
 MIN_NEEDLE_PIXELS = 15
 #: Base and tip keypoints closer than this (full-resolution px) are not trusted as two ends.
@@ -200,7 +208,7 @@ class NeedleLocalizer:
             # edge-on folds onto itself): drop the hint and gate at the nearest working distance.
             views, half_width, depth = self._masks((left, right), prob, scale, None, anchors)
         t2 = time.perf_counter()
-        fit = self._fit(left, views, ends, depth, half_width, previous)
+        fit = self._fit(left, views, ends, depth, half_width, previous, kp, score)
         t3 = time.perf_counter()
         T_cam, evidence, decided_by = self._orient(
             fit.T_cam_needle, (left, right), views, kp, score
@@ -275,11 +283,14 @@ class NeedleLocalizer:
             views.append(view)
         return views, half_width, depth
 
-    def _fit(self, left, views, ends, depth, half_width, previous) -> PoseFitResult:
+    def _fit(self, left, views, ends, depth, half_width, previous, kp, score) -> PoseFitResult:
         """Fit from the keypoints (and depth hint), plus end hypotheses behind occluders.
 
         An end of the visible needle that touches a grey occluder (or the border) may continue
-        behind it (:mod:`occlusion`): pushed-out ends join the fit as alternatives. A poor or
+        behind it (:mod:`occlusion`): pushed-out ends join the fit as alternatives. Where one
+        keypoint is confident and the other weak, the weak end is likely hidden: it is sought
+        at and behind the visible piece's far end. Confident keypoints of both eyes also guide
+        the search as a soft prior (:class:`~suture_bt.perception.pose_fit.EndPriorTerm`). A poor or
         failed fit often means a keypoint landed off the needle (e.g. on a jaw) or the disparity
         depth was wrong: it is refit without the depth hint, from the keypoints and from the
         mask's own ends, and whichever explains the edges best is kept.
@@ -290,11 +301,21 @@ class NeedleLocalizer:
             end_is_occluded(left, views[0], e, radius, self.rule) for e in visible_ends
         )
         behind = extended_ends(visible_ends, occluded)
-        self.last_occluded_ends = occluded
+        for e in (0, 1):
+            if score[0, e] >= STRONG_KEYPOINT_SCORE > score[0, 1 - e]:
+                h = anchored_ends(kp[0, e], e == 0, views[0])
+                behind += [h] + extended_ends(h, (e == 1, e == 0))
+        priors = tuple(kp[eye][score[eye] >= STRONG_KEYPOINT_SCORE] for eye in (0, 1))
         fit = None
         try:
             fit = self.fitter.fit(
-                views[0], views[1], ends, depth_hint=depth, warm_start=previous, alternatives=behind
+                views[0],
+                views[1],
+                ends,
+                depth_hint=depth,
+                warm_start=previous,
+                alternatives=behind,
+                end_priors=priors,
             )
         except NeedleNotFound:
             if ends is None and depth is None:
@@ -306,7 +327,12 @@ class NeedleLocalizer:
             main, others = (ends, [None]) if depth is not None else (None, [])
             try:
                 alt = self.fitter.fit(
-                    views[0], views[1], main, warm_start=previous, alternatives=others
+                    views[0],
+                    views[1],
+                    main,
+                    warm_start=previous,
+                    alternatives=others,
+                    end_priors=priors,
                 )
                 if fit is None or alt.cost < fit.cost:
                     fit = alt

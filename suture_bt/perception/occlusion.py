@@ -16,7 +16,7 @@ import cv2
 import numpy as np
 
 from suture_bt.perception.colour_refine import ColourRule, needle_coloured
-from suture_bt.perception.pose_fit import MaskView
+from suture_bt.perception.pose_fit import MaskView, edge_points
 
 #: Extensions (fractions of the visible chord) tried for an occluded end.
 EXTENSIONS = (0.35, 0.7)
@@ -72,6 +72,16 @@ def extended_ends(
         if occluded[1]:
             out.append((a, b + k * chord))
     return out
+
+
+def anchored_ends(anchor_uv: np.ndarray, anchor_is_base: bool, view: MaskView):
+    """(base, tip) pixels with one end at a trusted keypoint and the other at the visible
+    piece's far end (the mask edge point farthest from the anchor): where the network is
+    unsure of an end, that end is usually hidden and the visible piece stops short of it."""
+    pts = edge_points(view)
+    anchor = np.asarray(anchor_uv, float)
+    far = pts[int(np.argmax(np.linalg.norm(pts - anchor, axis=1)))]
+    return (anchor, far) if anchor_is_base else (far, anchor)
 
 
 def with_occluder(rgb: np.ndarray, view: MaskView, rule: ColourRule) -> MaskView:

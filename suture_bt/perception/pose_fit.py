@@ -76,6 +76,9 @@ FREE_WEIGHT = 1.0
 class FreeSpaceTerm:
     """Residuals (K, 2·M): free-space distance at the model's projected centre-line points."""
 
+    #: Also used in the final polish on every edge point.
+    polish = True
+
     def __init__(self, stereo: StereoCameraModel, model: NeedleModel, views) -> None:
         self.pts = model.centerline(N_FREE_SAMPLES)
         T_left_world = invert(stereo.left.T_world_cam)
@@ -99,6 +102,58 @@ class FreeSpaceTerm:
             v = cam.fy * p[..., 1] / z + cam.cy - y0
             out.append(FREE_WEIGHT * _bilinear(dt, u, v))
         return np.concatenate(out, -1)
+
+    def column_weights(self, n_edge: int) -> np.ndarray:
+        """Each centre-line sample counts as one edge point."""
+        return np.ones(N_FREE_SAMPLES * len(self.eyes))
+
+
+#: Share of the objective given to the keypoint prior (all its keypoints together), relative
+#: to all the edge points together.
+END_PRIOR_SHARE = 0.02
+
+
+class EndPriorTerm:
+    """Residuals (K, M): pixel distance from each confident keypoint to the nearer of the
+    model's projected ends (base and tip look alike to the outline, so either may take it).
+
+    The outline alone cannot tell where along a partly hidden arc the visible piece lies; a
+    keypoint the network is sure of says which basin is right. Keypoints can be several
+    pixels off, so the term only guides the search: the final solutions are polished and
+    chosen on the outline alone (1080p unoccluded with the term in the polish: 0.32 mm /
+    1.2 deg mean, against 0.17 mm / 0.2 deg without).
+    """
+
+    polish = False
+
+    def __init__(self, stereo: StereoCameraModel, model: NeedleModel, keypoints) -> None:
+        """``keypoints`` = (left (M, 2), right (M', 2)) pixel arrays (either may be empty)."""
+        self.ends = np.stack([model.base, model.tip])
+        T_left_world = invert(stereo.left.T_world_cam)
+        self.eyes = []
+        for cam, kp in zip((stereo.left, stereo.right), keypoints, strict=True):
+            kp = np.asarray(kp, float).reshape(-1, 2)
+            if len(kp):
+                self.eyes.append((cam, invert(cam.T_world_cam) @ invert(T_left_world), kp))
+        self.n = sum(len(kp) for _, _, kp in self.eyes)
+
+    def __bool__(self) -> bool:
+        return self.n > 0
+
+    def __call__(self, T: np.ndarray) -> np.ndarray:
+        out = []
+        for cam, T_el, kp in self.eyes:
+            M = T_el[None] @ T
+            p = self.ends @ M[:, :3, :3].transpose(0, 2, 1) + M[:, None, :3, 3]  # (K, 2, 3)
+            z = np.maximum(p[..., 2], 1e-6)
+            uv = np.stack([cam.fx * p[..., 0] / z + cam.cx, cam.fy * p[..., 1] / z + cam.cy], -1)
+            d = np.linalg.norm(uv[:, None, :, :] - kp[None, :, None, :], axis=-1)  # (K, M, 2)
+            out.append(d.min(-1))
+        return np.concatenate(out, -1)
+
+    def column_weights(self, n_edge: int) -> np.ndarray:
+        """All keypoints together weigh END_PRIOR_SHARE of all the edge points."""
+        return np.full(self.n, END_PRIOR_SHARE * n_edge / self.n)
 
 
 def _bilinear(img: np.ndarray, u: np.ndarray, v: np.ndarray) -> np.ndarray:
@@ -253,10 +308,10 @@ def residuals(
     return r, theta
 
 
-def cauchy_cost(r: np.ndarray, sigma: float) -> np.ndarray:
-    """Mean Cauchy loss per start (inf where any residual is undefined)."""
+def cauchy_cost(r: np.ndarray, sigma: float, weights: np.ndarray | None = None) -> np.ndarray:
+    """(Weighted) mean Cauchy loss per start (inf where any residual is undefined)."""
     c = 0.5 * sigma**2 * np.log1p((r / sigma) ** 2)
-    out = c.mean(-1)
+    out = c.mean(-1) if weights is None else (c * weights).sum(-1) / weights.sum()
     return np.where(np.isfinite(out), out, np.inf)
 
 
@@ -271,23 +326,27 @@ def levenberg_marquardt(
 ) -> tuple[np.ndarray, np.ndarray]:
     """Batched robust LM over starts x (K, 6); returns (x, cost).
 
-    ``extra(T) -> (K, M)`` adds residuals (the free-space term) to the edge residuals.
+    ``extra`` (a term or a list of terms: ``term(T) -> (K, M)`` residuals in px, and
+    ``term.column_weights(n_edge)``) adds residuals (free space, keypoint prior) to the edge
+    residuals.
     """
     x = np.array(x, dtype=float)
     cam = stereo.left
+    extras = [e for e in (extra if isinstance(extra, list | tuple) else [extra]) if e]
+    colw = np.concatenate([np.ones(len(rays))] + [e.column_weights(len(rays)) for e in extras])
 
     def both(T, *a, **k):
         r, th = residuals(T, rays, model, *a, **k)
-        return (np.concatenate([r, extra(T)], 1) if extra else r), th
+        return (np.concatenate([r] + [e(T) for e in extras], 1) if extras else r), th
 
     r, theta = both(params_to_pose(x, cam, model))
-    cost = cauchy_cost(r, sigma)
+    cost = cauchy_cost(r, sigma, colw)
     lam = np.full(len(x), 1e-2)
     for _ in range(iters):
         ok = np.isfinite(cost)
         if not ok.any():
             break
-        w = 1.0 / (1.0 + (r / sigma) ** 2)
+        w = colw / (1.0 + (r / sigma) ** 2)
         w = np.where(np.isfinite(w), w, 0.0)
         rr = np.where(np.isfinite(r), r, 0.0)
         xs = x[:, None, :] + np.diag(FD_STEPS)[None]
@@ -310,7 +369,7 @@ def levenberg_marquardt(
             break
         xn = x + delta
         rn, thn = both(params_to_pose(xn, cam, model), theta_start=theta)
-        cn = cauchy_cost(rn, sigma)
+        cn = cauchy_cost(rn, sigma, colw)
         better = cn < cost
         x[better], r[better], theta[better], cost[better] = (
             xn[better],
@@ -383,8 +442,12 @@ class PoseFitter:
         depth_hint: float | None = None,
         warm_start: np.ndarray | None = None,
         alternatives: Sequence[tuple[np.ndarray, np.ndarray] | None] = (),
+        end_priors: tuple[np.ndarray, np.ndarray] | None = None,
     ) -> PoseFitResult:
         """Fit; ``endpoints_left`` = (base uv, tip uv) in the left image; raise NeedleNotFound.
+
+        ``end_priors`` (left, right pixel arrays) are keypoints the network is sure of: each
+        pulls the nearer model end towards it (:class:`EndPriorTerm`).
 
         ``alternatives`` are further end-pixel hypotheses (``None``: the mask's own farthest
         pair), searched over all depths; the best ``n_keep_alternative`` starts of each join
@@ -410,7 +473,13 @@ class PoseFitter:
                 np.asarray(warm_start), np.stack([self.model.base, self.model.tip])
             )
             endpoints_left = tuple(project_cam(cam, ends))
-        free = FreeSpaceTerm(self.stereo, self.model, (left, right)) or None
+        terms = [FreeSpaceTerm(self.stereo, self.model, (left, right))]
+        if end_priors is not None:
+            terms.append(EndPriorTerm(self.stereo, self.model, end_priors))
+        terms = [t for t in terms if t]
+        coarse_w = np.concatenate(
+            [np.ones(len(coarse))] + [t.column_weights(len(coarse)) for t in terms]
+        )
 
         def best_starts(ends, hint, n: int) -> np.ndarray:
             """The n lowest-cost feasible starts (coarse edge subset) for one end hypothesis."""
@@ -420,9 +489,8 @@ class PoseFitter:
             st = self._starts(ub, ut, hint)
             T0 = params_to_pose(st, cam, self.model)
             r0, _ = residuals(T0, coarse, self.model, grid=12)
-            if free:
-                r0 = np.concatenate([r0, free(T0)], 1)
-            c0 = cauchy_cost(r0, 3.0)
+            r0 = np.concatenate([r0] + [t(T0) for t in terms], 1)
+            c0 = cauchy_cost(r0, 3.0, coarse_w)
             order = np.argsort(c0)[:n]
             return st[[i for i in order if np.isfinite(c0[i])]]
 
@@ -434,10 +502,10 @@ class PoseFitter:
         if not len(starts):
             raise NeedleNotFound("no feasible pose hypothesis from the needle's end points")
         it1, it2, it3 = self.iterations
-        x, c1 = levenberg_marquardt(starts, coarse, self.stereo, self.model, it1, 3.0, free)
+        x, c1 = levenberg_marquardt(starts, coarse, self.stereo, self.model, it1, 3.0, terms)
         if self.n_second_stage and len(x) > self.n_second_stage:
             x = x[np.argsort(c1)[: self.n_second_stage]]
-        x, c = levenberg_marquardt(x, mid, self.stereo, self.model, it2, 1.0, free)
+        x, c = levenberg_marquardt(x, mid, self.stereo, self.model, it2, 1.0, terms)
         c = np.where(self._in_range(x), c, np.inf)
         if not np.isfinite(c).any():
             lo, hi = self.depth_range
@@ -453,7 +521,8 @@ class PoseFitter:
             if all(_rot_angle(T_mid[i, :3, :3], T_mid[j, :3, :3]) > DISTINCT for i in kept):
                 finals.append(k)
                 kept.append(j)
-        xf, cf = levenberg_marquardt(x[finals], rays, self.stereo, self.model, it3, 1.0, free)
+        polish = [t for t in terms if t.polish]
+        xf, cf = levenberg_marquardt(x[finals], rays, self.stereo, self.model, it3, 1.0, polish)
         cf = np.where(self._in_range(xf), cf, np.inf)
         if not np.isfinite(cf).any():
             raise NeedleNotFound("pose fit diverged")
