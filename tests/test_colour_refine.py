@@ -112,3 +112,11 @@ def test_colour_test_passes_grey_metal_only():
     pink, grey, black, white = (215, 140, 132), (158, 161, 168), (20, 10, 10), (255, 255, 255)
     px = np.array([[pink, grey, black, white]], np.uint8)
     assert needle_coloured(px, ColourRule())[0].tolist() == [False, True, False, True]
+
+
+def test_dark_pixels_must_be_neutral_to_pass():
+    """A port hole or the cavity in shadow (dark, red-tinted) is not needle; the needle in
+    shadow (dark, neutral) and a bright, slightly warm highlight on it are."""
+    port_hole, shaded_wire, warm_highlight = (44, 36, 34), (44, 44, 45), (180, 172, 170)
+    px = np.array([[port_hole, shaded_wire, warm_highlight]], np.uint8)
+    assert needle_coloured(px, ColourRule())[0].tolist() == [False, True, True]

@@ -3,7 +3,9 @@
 The needle is grey metal (blue ≥ red, also when saturated white at 2× brightness); the tissue
 is pink (red well above blue) and the empty cavity is dark red. Inside a band around the
 upsampled coarse mask, a pixel is needle when blue − red ≥ ``min_blue_minus_red`` and its
-mean level ≥ ``min_level``. The renderer does not anti-alias, so a per-pixel decision keeps
+mean level ≥ ``min_level``; a dark pixel must also be neutral (port holes and the cavity in
+shadow are red-tinted; on the 1080p occluded benchmark they had entered the masks of needles
+in a port). The renderer does not anti-alias, so a per-pixel decision keeps
 the wire's edges where they are (no blur, no bias).
 """
 
@@ -23,6 +25,10 @@ class ColourRule:
 
     min_blue_minus_red: float = -12.0
     min_level: float = 32.0
+    #: Below this mean level a pixel must be neutral too (blue − red ≥ ``dark_min_blue_minus_red``):
+    #: the needle in shadow stays grey, while the dark port holes and cavity are red-tinted.
+    dark_level: float = 50.0
+    dark_min_blue_minus_red: float = -4.0
     band_px: int = 9
     min_component_px: int = 4
 
@@ -31,7 +37,9 @@ def needle_coloured(rgb: np.ndarray, rule: ColourRule) -> np.ndarray:
     """Pixels passing the needle colour test (grey metal: the needle and the instruments)."""
     c = rgb.astype(np.int16)
     level = c.sum(-1) / 3.0
-    return (c[..., 2] - c[..., 0] >= rule.min_blue_minus_red) & (level >= rule.min_level)
+    bmr = c[..., 2] - c[..., 0]
+    dark_ok = (level >= rule.dark_level) | (bmr >= rule.dark_min_blue_minus_red)
+    return (bmr >= rule.min_blue_minus_red) & (level >= rule.min_level) & dark_ok
 
 
 def coarse_components(
