@@ -115,8 +115,10 @@ def test_colour_test_passes_grey_metal_only():
 
 
 def test_dark_pixels_must_be_neutral_to_pass():
-    """A port hole or the cavity in shadow (dark, red-tinted) is not needle; the needle in
-    shadow (dark, neutral) and a bright, slightly warm highlight on it are."""
+    """A port hole or the cavity in shadow (dark, red-tinted) is not needle, nor is sensor
+    noise on a black shaft; the needle in shadow (dark, neutral) and a bright, slightly warm
+    highlight on it are."""
     port_hole, shaded_wire, warm_highlight = (44, 36, 34), (44, 44, 45), (180, 172, 170)
-    px = np.array([[port_hole, shaded_wire, warm_highlight]], np.uint8)
-    assert needle_coloured(px, ColourRule())[0].tolist() == [False, True, True]
+    noisy_black_shaft = (35, 35, 36)
+    px = np.array([[port_hole, shaded_wire, warm_highlight, noisy_black_shaft]], np.uint8)
+    assert needle_coloured(px, ColourRule())[0].tolist() == [False, True, True, False]
