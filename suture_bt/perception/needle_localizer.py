@@ -29,6 +29,7 @@ from suture_bt.perception.colour_refine import (
     free_space_dt,
     refine_mask,
 )
+from suture_bt.perception.geodesic_ends import geodesic_ends
 from suture_bt.perception.mask_disparity import mask_disparity
 from suture_bt.perception.needle_ends import MIN_EVIDENCE, base_evidence, swapped
 from suture_bt.perception.needle_projection import project_cam, transform_points
@@ -114,6 +115,16 @@ def _net_input(rgb: np.ndarray, width: int) -> tuple[np.ndarray, float]:
     if hp != h:
         small = np.concatenate([small, np.zeros((hp - h, width, 3), small.dtype)], 0)
     return small, s
+
+
+def _same_pair(a, b, tol_px: float = 3.0) -> bool:
+    """Whether two unordered end-pixel pairs coincide within ``tol_px``."""
+    a0, a1, b0, b1 = (np.asarray(p, float) for p in (*a, *b))
+    d = min(
+        max(np.linalg.norm(a0 - b0), np.linalg.norm(a1 - b1)),
+        max(np.linalg.norm(a0 - b1), np.linalg.norm(a1 - b0)),
+    )
+    return bool(d <= tol_px)
 
 
 class NeedleLocalizer:
@@ -305,6 +316,9 @@ class NeedleLocalizer:
             if score[0, e] >= STRONG_KEYPOINT_SCORE > score[0, 1 - e]:
                 h = anchored_ends(kp[0, e], e == 0, views[0])
                 behind += [h] + extended_ends(h, (e == 1, e == 0))
+        along = geodesic_ends(views[0])
+        if along is not None and not _same_pair(along, visible_ends):
+            behind.append(along)
         priors = tuple(kp[eye][score[eye] >= STRONG_KEYPOINT_SCORE] for eye in (0, 1))
         fit = None
         try:

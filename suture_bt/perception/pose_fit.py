@@ -7,8 +7,11 @@ radius along the centre-line arc, so a ray is tangent exactly when its distance 
 the wire radius; the residual is that distance minus the radius, in pixels at the point's
 depth. Rays past either end measure to the end point, which is the hemispherical cap. Unlike a
 chamfer to the centre-line this has no pull along the line of sight (DESIGN.md §5).
-Minimised by Levenberg-Marquardt with Cauchy weights, vectorised over many starts (the
-tilt-mirror ambiguity), on the parameters of :mod:`needle_projection`.
+Minimised by Levenberg-Marquardt with robust weights, vectorised over many starts (the
+tilt-mirror ambiguity), on the parameters of :mod:`needle_projection`: Cauchy while searching
+(wide basins), Geman-McClure for the final polish and choice, so a few stray mask pixels (a
+sliver of jaw the colour test kept) cannot pull the answer onto a pose that half-explains them.
+Optional extra terms: free space (experimental, off) and confident keypoints (search only).
 """
 
 from __future__ import annotations
@@ -308,9 +311,26 @@ def residuals(
     return r, theta
 
 
-def cauchy_cost(r: np.ndarray, sigma: float, weights: np.ndarray | None = None) -> np.ndarray:
-    """(Weighted) mean Cauchy loss per start (inf where any residual is undefined)."""
-    c = 0.5 * sigma**2 * np.log1p((r / sigma) ** 2)
+#: Robust losses of the fit: Cauchy (outliers grow logarithmically; a wide basin for the
+#: search) and Geman-McClure (outliers cost a constant; the pose that explains the most edge
+#: points tightly wins, however a few stray mask pixels lie).
+LOSSES = ("cauchy", "geman_mcclure")
+
+
+def _irls_weights(r: np.ndarray, sigma: float, loss: str) -> np.ndarray:
+    """IRLS weights ψ(r)/r of the loss."""
+    q = 1.0 + (r / sigma) ** 2
+    return 1.0 / q if loss == "cauchy" else 1.0 / q**2
+
+
+def robust_cost(
+    r: np.ndarray, sigma: float, weights: np.ndarray | None = None, loss: str = "cauchy"
+) -> np.ndarray:
+    """(Weighted) mean robust loss per start (inf where any residual is undefined)."""
+    if loss not in LOSSES:
+        raise ValueError(f"unknown loss {loss!r}; expected one of {LOSSES}")
+    x2 = (r / sigma) ** 2
+    c = 0.5 * sigma**2 * (np.log1p(x2) if loss == "cauchy" else x2 / (1.0 + x2))
     out = c.mean(-1) if weights is None else (c * weights).sum(-1) / weights.sum()
     return np.where(np.isfinite(out), out, np.inf)
 
@@ -323,6 +343,7 @@ def levenberg_marquardt(
     iters: int,
     sigma: float,
     extra=None,
+    loss: str = "cauchy",
 ) -> tuple[np.ndarray, np.ndarray]:
     """Batched robust LM over starts x (K, 6); returns (x, cost).
 
@@ -340,13 +361,13 @@ def levenberg_marquardt(
         return (np.concatenate([r] + [e(T) for e in extras], 1) if extras else r), th
 
     r, theta = both(params_to_pose(x, cam, model))
-    cost = cauchy_cost(r, sigma, colw)
+    cost = robust_cost(r, sigma, colw, loss)
     lam = np.full(len(x), 1e-2)
     for _ in range(iters):
         ok = np.isfinite(cost)
         if not ok.any():
             break
-        w = colw / (1.0 + (r / sigma) ** 2)
+        w = colw * _irls_weights(r, sigma, loss)
         w = np.where(np.isfinite(w), w, 0.0)
         rr = np.where(np.isfinite(r), r, 0.0)
         xs = x[:, None, :] + np.diag(FD_STEPS)[None]
@@ -369,7 +390,7 @@ def levenberg_marquardt(
             break
         xn = x + delta
         rn, thn = both(params_to_pose(xn, cam, model), theta_start=theta)
-        cn = cauchy_cost(rn, sigma, colw)
+        cn = robust_cost(rn, sigma, colw, loss)
         better = cn < cost
         x[better], r[better], theta[better], cost[better] = (
             xn[better],
@@ -415,7 +436,7 @@ class PoseFitter:
     model: NeedleModel = field(default_factory=NeedleModel)
     n_psi: int = 12
     max_points_per_eye: int = 1200
-    coarse_points_per_eye: int = 60
+    coarse_points_per_eye: int = 40
     mid_points_per_eye: int = 200
     n_keep: int = 12
     n_keep_alternative: int = 6
@@ -424,12 +445,14 @@ class PoseFitter:
     #: LM iterations: all kept starts at σ = 3 px on the coarse subsample, the best
     #: ``n_second_stage`` at σ = 1 px on the mid one, then the best ``n_final`` clearly
     #: different solutions on every edge point. Many cheap first-stage starts find the right
-    #: basin more often than few expensive ones (1080p occluded benchmark: success 0.465 ->
-    #: 0.515 at 134 -> 127 ms).
+    #: basin more often than few expensive ones (1080p occluded benchmark, cached scenes:
+    #: success 0.465 -> 0.495 at 134 -> 119 ms with 12 + 6 starts and 8 second-stage ones).
     iterations: tuple[int, int, int] = (10, 10, 8)
-    n_second_stage: int = 8
+    n_second_stage: int = 6
     #: Clearly different solutions (> DISTINCT apart) polished on every edge point.
     n_final: int = 2
+    #: Loss of that polish, whose cost also chooses between them (see LOSSES).
+    final_loss: str = "geman_mcclure"
     #: Working distance (m) of the arc centre from the left camera: fits outside are rejected
     #: (a short visible piece is also explained by a much nearer, larger-looking needle).
     depth_range: tuple[float, float] = (0.03, 0.5)
@@ -490,7 +513,7 @@ class PoseFitter:
             T0 = params_to_pose(st, cam, self.model)
             r0, _ = residuals(T0, coarse, self.model, grid=12)
             r0 = np.concatenate([r0] + [t(T0) for t in terms], 1)
-            c0 = cauchy_cost(r0, 3.0, coarse_w)
+            c0 = robust_cost(r0, 3.0, coarse_w)
             order = np.argsort(c0)[:n]
             return st[[i for i in order if np.isfinite(c0[i])]]
 
@@ -522,7 +545,9 @@ class PoseFitter:
                 finals.append(k)
                 kept.append(j)
         polish = [t for t in terms if t.polish]
-        xf, cf = levenberg_marquardt(x[finals], rays, self.stereo, self.model, it3, 1.0, polish)
+        xf, cf = levenberg_marquardt(
+            x[finals], rays, self.stereo, self.model, it3, 1.0, polish, self.final_loss
+        )
         cf = np.where(self._in_range(xf), cf, np.inf)
         if not np.isfinite(cf).any():
             raise NeedleNotFound("pose fit diverged")
