@@ -105,6 +105,7 @@ def _reason_kind(reason: str) -> str:
     """A NeedleNotFound reason without its numbers, for counting refusals by kind."""
     for kind in (
         "misses the needle's outline",
+        "the mask holds something else",
         "too few needle-coloured pixels",
         "sees no needle",
         "mm from the camera",

@@ -46,7 +46,7 @@ def test_bad_image_is_a_value_error():
         loc.localize(np.zeros((360, 640), np.uint8), np.zeros((360, 640, 3), np.uint8))
 
 
-def test_shipped_network_localizes_a_rendered_needle():
+def test_shipped_network_localizes_a_rendered_needle(monkeypatch):
     if not DEFAULT_WEIGHTS.is_file():
         pytest.fail(f"shipped weights missing: {DEFAULT_WEIGHTS}")
     from suture_bt.datagen.needle_data import SimScene
@@ -68,6 +68,10 @@ def test_shipped_network_localizes_a_rendered_needle():
         est = NeedleLocalizer(sim.stereo).localize(left, right)
         with pytest.raises(NeedleNotFound, match="RMS"):  # a fit worse than allowed is refused
             NeedleLocalizer(sim.stereo, max_rms_px=0.0).localize(left, right)
+        with monkeypatch.context() as m:  # so is one that explains too little of the mask
+            m.setattr("suture_bt.perception.needle_localizer.MIN_INLIER_FRACTION", 1.01)
+            with pytest.raises(NeedleNotFound, match="holds something else"):
+                NeedleLocalizer(sim.stereo).localize(left, right)
         T_true = invert(sim.stereo.left.T_world_cam) @ s.T_world_needle
     finally:
         sim.close()
@@ -114,3 +118,16 @@ def test_masks_mark_the_occluder_and_keep_it_with_the_free_space_term():
         assert v.occluder is not None and v.occluder.any()
         assert not (v.occluder & v.mask).any()
         assert (v.free_dt is not None) == free
+
+
+def test_keypoints_farther_apart_than_the_needle_can_appear_keep_only_the_stronger():
+    """At 1080p the needle's ends are at most ~340 px apart (its chord at 50 mm, with
+    slack): a pair 900 px apart has one keypoint on something else, the weaker is dropped."""
+    loc = NeedleLocalizer(stereo(1920, 1080), net=_eager_net())
+    kp = np.array([[[830.0, 220.0], [1750.0, 220.0]], [[800.0, 220.0], [900.0, 230.0]]])
+    score = np.array([[0.87, 0.47], [0.6, 0.7]])
+    out = loc._plausible(kp, score)
+    np.testing.assert_array_equal(out, [[0.87, 0.0], [0.6, 0.7]])
+    assert score[0, 1] == 0.47  # the raw scores are left alone
+    far_weak = np.array([[0.1, 0.9], [0.6, 0.7]])  # an untrusted keypoint is no rival
+    np.testing.assert_array_equal(loc._plausible(kp, far_weak), far_weak)
