@@ -293,3 +293,17 @@ def test_stray_mask_pixels_do_not_pull_the_final_choice_off_the_needle():
     res = PoseFitter(st, MODEL).fit(MaskView(m, left.origin), right, tuple(ends))
     pos, ang = pose_errors(res.T_cam_needle, T)
     assert pos < 0.3 and ang < 1.0
+
+
+def test_a_second_search_from_the_best_poses_own_ends_finds_the_mirror_twin():
+    """Tip hidden, started from the visible piece with a misleading alternative: the first
+    search settles on the tilt-mirror twin (about 2 radii away, a worse cost); searching again
+    from that pose's own end pixels and depth finds the needle."""
+    st, T, left, right, ends = _scene_1080p(10, 0.0)
+    occ, short, _ = _tip_hidden(st, T, left, right, ends)
+    alt = [tuple(ends + np.array([[30.0, 10.0], [-20.0, 25.0]]))]
+    first = PoseFitter(st, MODEL, n_reseed=0).fit(*occ, short, alternatives=alt)
+    assert pose_errors(first.T_cam_needle, T)[0] > 10.0
+    res = PoseFitter(st, MODEL).fit(*occ, short, alternatives=alt)
+    pos, ang = pose_errors(res.T_cam_needle, T)
+    assert pos < 0.5 and ang < 2.0 and res.cost < first.cost

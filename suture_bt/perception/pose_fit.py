@@ -451,6 +451,10 @@ class PoseFitter:
     n_second_stage: int = 6
     #: Clearly different solutions (> DISTINCT apart) polished on every edge point.
     n_final: int = 2
+    #: Starts of a second search from the best second-stage pose's own end pixels and depth
+    #: (0: none), made when there are alternative end hypotheses (a hidden end is suspected).
+    #: 1080p occluded benchmark: success 0.690 -> 0.735 (seed 1000), 0.735 -> 0.785 (2000).
+    n_reseed: int = 6
     #: Loss of that polish, whose cost also chooses between them (see LOSSES).
     final_loss: str = "geman_mcclure"
     #: Working distance (m) of the arc centre from the left camera: fits outside are rejected
@@ -530,6 +534,19 @@ class PoseFitter:
             x = x[np.argsort(c1)[: self.n_second_stage]]
         x, c = levenberg_marquardt(x, mid, self.stereo, self.model, it2, 1.0, terms)
         c = np.where(self._in_range(x), c, np.inf)
+        if self.n_reseed and alternatives and np.isfinite(c).any():
+            # The best pose's own end pixels and depth are sharper than any keypoint: a fresh
+            # grid of plane angles there reaches the tilt-mirror twin the first starts missed.
+            T_best = params_to_pose(x[int(np.argmin(c))], cam, self.model)
+            ends = project_cam(
+                cam, transform_points(T_best, np.stack([self.model.base, self.model.tip]))
+            )
+            st = best_starts(tuple(ends), float(T_best[2, 3]), self.n_reseed)
+            if len(st):
+                y, cy = levenberg_marquardt(st, coarse, self.stereo, self.model, it1, 3.0, terms)
+                y, cy = levenberg_marquardt(y, mid, self.stereo, self.model, it2, 1.0, terms)
+                x = np.concatenate([x, y])
+                c = np.concatenate([c, np.where(self._in_range(y), cy, np.inf)])
         if not np.isfinite(c).any():
             lo, hi = self.depth_range
             raise NeedleNotFound(
