@@ -60,7 +60,7 @@ MIN_KEYPOINT_SCORE = 0.15
 #: A keypoint this confident anchors its end even when the other end's keypoint is weak
 #: (then the other end is sought at, and behind, the visible piece's far end).
 STRONG_KEYPOINT_SCORE = 0.5
-#: Slack on the farthest two end keypoints of one needle can be apart (its chord at MIN_DEPTH).
+#: Slack on how far apart one needle's two end keypoints can be (its chord seen at MIN_DEPTH).
 MAX_CHORD_MARGIN = 1.2
 #: Fewest full-resolution needle pixels per eye to attempt a fit.
 MIN_NEEDLE_PIXELS = 15
