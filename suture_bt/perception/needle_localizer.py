@@ -66,9 +66,6 @@ MAX_CHORD_MARGIN = 1.2
 MIN_NEEDLE_PIXELS = 15
 #: Base and tip keypoints closer than this (full-resolution px) are not trusted as two ends.
 MIN_END_SEPARATION_PX = 8.0
-#: A fit worse than this (RMS edge residual, px; inlier share) is retried from the mask's ends.
-RETRY_RMS_PX = 0.45
-RETRY_INLIERS = 0.85
 #: A final fit whose RMS edge residual exceeds this (px) is refused: in the benchmarks every
 #: correct fit stayed below 0.45 px and every fit above 0.6 px was centimetres off.
 MAX_RMS_PX = 0.6
@@ -321,10 +318,11 @@ class NeedleLocalizer:
         behind it (:mod:`occlusion`): pushed-out ends join the fit as alternatives. Where one
         keypoint is confident and the other weak, the weak end is likely hidden: it is sought
         at and behind the visible piece's far end. Confident keypoints of both eyes also guide
-        the search as a soft prior (:class:`~suture_bt.perception.pose_fit.EndPriorTerm`). A poor or
+        the search as a soft prior (:class:`~suture_bt.perception.pose_fit.EndPriorTerm`). A
         failed fit often means a keypoint landed off the needle (e.g. on a jaw) or the disparity
         depth was wrong: it is refit without the depth hint, from the keypoints and from the
-        mask's own ends, and whichever explains the edges best is kept.
+        mask's own ends. (Refitting poor fits too, as before, cost 10-15 ms per occluded frame
+        for one scene in 200 once the search above was in place.)
         """
         visible_ends = ends if ends is not None else mask_ends(views[0])
         radius = 2.0 * half_width + 3.0
@@ -336,6 +334,7 @@ class NeedleLocalizer:
             if score[0, e] >= STRONG_KEYPOINT_SCORE > score[0, 1 - e]:
                 h = anchored_ends(kp[0, e], e == 0, views[0])
                 behind += [h] + extended_ends(h, (e == 1, e == 0))
+        hidden = bool(behind)  # an end touches an occluder or its keypoint is weak
         along = geodesic_ends(views[0])
         if along is not None and not _same_pair(along, visible_ends):
             behind.append(along)
@@ -350,12 +349,12 @@ class NeedleLocalizer:
                 warm_start=previous,
                 alternatives=behind,
                 end_priors=priors,
+                hidden_end=hidden,
             )
         except NeedleNotFound:
             if ends is None and depth is None:
                 raise
-        poor = fit is None or fit.rms_px > RETRY_RMS_PX or fit.inlier_fraction < RETRY_INLIERS
-        if poor and ends is not None:
+        if fit is None and ends is not None:
             # The first fit already searched the occluded-end hypotheses at every depth; new
             # here are the keypoints without the depth hint and the mask's own ends.
             main, others = (ends, [None]) if depth is not None else (None, [])
@@ -367,9 +366,9 @@ class NeedleLocalizer:
                     warm_start=previous,
                     alternatives=others,
                     end_priors=priors,
+                    hidden_end=hidden,
                 )
-                if fit is None or alt.cost < fit.cost:
-                    fit = alt
+                fit = alt
             except NeedleNotFound:
                 pass
         if fit is None:

@@ -447,12 +447,12 @@ class PoseFitter:
     #: different solutions on every edge point. Many cheap first-stage starts find the right
     #: basin more often than few expensive ones (1080p occluded benchmark, cached scenes:
     #: success 0.465 -> 0.495 at 134 -> 119 ms with 12 + 6 starts and 8 second-stage ones).
-    iterations: tuple[int, int, int] = (10, 10, 8)
+    iterations: tuple[int, int, int] = (8, 8, 6)
     n_second_stage: int = 6
     #: Clearly different solutions (> DISTINCT apart) polished on every edge point.
     n_final: int = 2
     #: Starts of a second search from the best second-stage pose's own end pixels and depth
-    #: (0: none), made when there are alternative end hypotheses (a hidden end is suspected).
+    #: (0: none), made when an end may be hidden (see ``fit``).
     #: 1080p occluded benchmark: success 0.690 -> 0.735 (seed 1000), 0.735 -> 0.785 (2000).
     n_reseed: int = 6
     #: Loss of that polish, whose cost also chooses between them (see LOSSES).
@@ -470,11 +470,14 @@ class PoseFitter:
         warm_start: np.ndarray | None = None,
         alternatives: Sequence[tuple[np.ndarray, np.ndarray] | None] = (),
         end_priors: tuple[np.ndarray, np.ndarray] | None = None,
+        hidden_end: bool | None = None,
     ) -> PoseFitResult:
         """Fit; ``endpoints_left`` = (base uv, tip uv) in the left image; raise NeedleNotFound.
 
         ``end_priors`` (left, right pixel arrays) are keypoints the network is sure of: each
-        pulls the nearer model end towards it (:class:`EndPriorTerm`).
+        pulls the nearer model end towards it (:class:`EndPriorTerm`). ``hidden_end`` says
+        whether an end may be hidden (then the search is repeated from the best pose's own
+        ends, ``n_reseed``); None: whenever there are ``alternatives``.
 
         ``alternatives`` are further end-pixel hypotheses (``None``: the mask's own farthest
         pair), searched over all depths; the best ``n_keep_alternative`` starts of each join
@@ -534,7 +537,9 @@ class PoseFitter:
             x = x[np.argsort(c1)[: self.n_second_stage]]
         x, c = levenberg_marquardt(x, mid, self.stereo, self.model, it2, 1.0, terms)
         c = np.where(self._in_range(x), c, np.inf)
-        if self.n_reseed and alternatives and np.isfinite(c).any():
+        if hidden_end is None:
+            hidden_end = bool(alternatives)
+        if self.n_reseed and hidden_end and np.isfinite(c).any():
             # The best pose's own end pixels and depth are sharper than any keypoint: a fresh
             # grid of plane angles there reaches the tilt-mirror twin the first starts missed.
             T_best = params_to_pose(x[int(np.argmin(c))], cam, self.model)
