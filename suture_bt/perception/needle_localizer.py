@@ -339,18 +339,22 @@ class NeedleLocalizer:
         if along is not None and not _same_pair(along, visible_ends):
             behind.append(along)
         priors = tuple(kp[eye][score[eye] >= STRONG_KEYPOINT_SCORE] for eye in (0, 1))
-        fit = None
-        try:
-            fit = self.fitter.fit(
+
+        def attempt(main, alternatives, depth_hint=None) -> PoseFitResult:
+            return self.fitter.fit(
                 views[0],
                 views[1],
-                ends,
-                depth_hint=depth,
+                main,
+                depth_hint=depth_hint,
                 warm_start=previous,
-                alternatives=behind,
+                alternatives=alternatives,
                 end_priors=priors,
                 hidden_end=hidden,
             )
+
+        fit = None
+        try:
+            fit = attempt(ends, behind, depth)
         except NeedleNotFound:
             if ends is None and depth is None:
                 raise
@@ -359,16 +363,7 @@ class NeedleLocalizer:
             # here are the keypoints without the depth hint and the mask's own ends.
             main, others = (ends, [None]) if depth is not None else (None, [])
             try:
-                alt = self.fitter.fit(
-                    views[0],
-                    views[1],
-                    main,
-                    warm_start=previous,
-                    alternatives=others,
-                    end_priors=priors,
-                    hidden_end=hidden,
-                )
-                fit = alt
+                fit = attempt(main, others)
             except NeedleNotFound:
                 pass
         if fit is None:

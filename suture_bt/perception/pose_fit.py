@@ -76,6 +76,20 @@ N_FREE_SAMPLES = 24
 FREE_WEIGHT = 1.0
 
 
+def _eye_transforms(stereo: StereoCameraModel) -> tuple[np.ndarray, np.ndarray]:
+    """T_eye_left for the left and right cameras (poses are fitted in the left frame)."""
+    T_world_left = stereo.left.T_world_cam
+    return tuple(invert(cam.T_world_cam) @ T_world_left for cam in (stereo.left, stereo.right))
+
+
+def _project_model_points(cam, T_eye_left: np.ndarray, T: np.ndarray, pts: np.ndarray):
+    """Pixels (u, v), each (K, P), of needle-frame points ``pts`` under poses T (K, 4, 4)."""
+    M = T_eye_left[None] @ T  # (K, 4, 4) needle in this eye
+    p = pts @ M[:, :3, :3].transpose(0, 2, 1) + M[:, None, :3, 3]
+    z = np.maximum(p[..., 2], 1e-6)
+    return cam.fx * p[..., 0] / z + cam.cx, cam.fy * p[..., 1] / z + cam.cy
+
+
 class FreeSpaceTerm:
     """Residuals (K, 2·M): free-space distance at the model's projected centre-line points."""
 
@@ -84,13 +98,11 @@ class FreeSpaceTerm:
 
     def __init__(self, stereo: StereoCameraModel, model: NeedleModel, views) -> None:
         self.pts = model.centerline(N_FREE_SAMPLES)
-        T_left_world = invert(stereo.left.T_world_cam)
         self.eyes = []
-        for cam, v in zip((stereo.left, stereo.right), views, strict=True):
-            if v.free_dt is None:
-                continue
-            T_eye_left = invert(cam.T_world_cam) @ invert(T_left_world)
-            self.eyes.append((cam, T_eye_left, v.free_dt.astype(np.float64), v.free_origin))
+        cams = (stereo.left, stereo.right)
+        for cam, T_el, v in zip(cams, _eye_transforms(stereo), views, strict=True):
+            if v.free_dt is not None:
+                self.eyes.append((cam, T_el, v.free_dt.astype(np.float64), v.free_origin))
 
     def __bool__(self) -> bool:
         return bool(self.eyes)
@@ -98,12 +110,8 @@ class FreeSpaceTerm:
     def __call__(self, T: np.ndarray) -> np.ndarray:
         out = []
         for cam, T_el, dt, (x0, y0) in self.eyes:
-            M = T_el[None] @ T  # (K, 4, 4) needle in this eye
-            p = self.pts @ M[:, :3, :3].transpose(0, 2, 1) + M[:, None, :3, 3]
-            z = np.maximum(p[..., 2], 1e-6)
-            u = cam.fx * p[..., 0] / z + cam.cx - x0
-            v = cam.fy * p[..., 1] / z + cam.cy - y0
-            out.append(FREE_WEIGHT * _bilinear(dt, u, v))
+            u, v = _project_model_points(cam, T_el, T, self.pts)
+            out.append(FREE_WEIGHT * _bilinear(dt, u - x0, v - y0))
         return np.concatenate(out, -1)
 
     def column_weights(self, n_edge: int) -> np.ndarray:
@@ -132,12 +140,12 @@ class EndPriorTerm:
     def __init__(self, stereo: StereoCameraModel, model: NeedleModel, keypoints) -> None:
         """``keypoints`` = (left (M, 2), right (M', 2)) pixel arrays (either may be empty)."""
         self.ends = np.stack([model.base, model.tip])
-        T_left_world = invert(stereo.left.T_world_cam)
         self.eyes = []
-        for cam, kp in zip((stereo.left, stereo.right), keypoints, strict=True):
+        cams = (stereo.left, stereo.right)
+        for cam, T_el, kp in zip(cams, _eye_transforms(stereo), keypoints, strict=True):
             kp = np.asarray(kp, float).reshape(-1, 2)
             if len(kp):
-                self.eyes.append((cam, invert(cam.T_world_cam) @ invert(T_left_world), kp))
+                self.eyes.append((cam, T_el, kp))
         self.n = sum(len(kp) for _, _, kp in self.eyes)
 
     def __bool__(self) -> bool:
@@ -146,10 +154,7 @@ class EndPriorTerm:
     def __call__(self, T: np.ndarray) -> np.ndarray:
         out = []
         for cam, T_el, kp in self.eyes:
-            M = T_el[None] @ T
-            p = self.ends @ M[:, :3, :3].transpose(0, 2, 1) + M[:, None, :3, 3]  # (K, 2, 3)
-            z = np.maximum(p[..., 2], 1e-6)
-            uv = np.stack([cam.fx * p[..., 0] / z + cam.cx, cam.fy * p[..., 1] / z + cam.cy], -1)
+            uv = np.stack(_project_model_points(cam, T_el, T, self.ends), -1)  # (K, 2, 2)
             d = np.linalg.norm(uv[:, None, :, :] - kp[None, :, None, :], axis=-1)  # (K, M, 2)
             out.append(d.min(-1))
         return np.concatenate(out, -1)
