@@ -12,8 +12,9 @@ from suture_bt.perception.needle_ends import (
     swap_rotation,
     swapped,
     violet_score,
+    with_band_pieces,
 )
-from suture_bt.perception.needle_projection import rasterize_needle
+from suture_bt.perception.needle_projection import project_cam, rasterize_needle, transform_points
 from suture_bt.perception.pose_fit import MaskView
 from suture_bt.transforms import invert, make_transform
 
@@ -92,3 +93,60 @@ def test_band_position_decides_when_the_fit_is_a_few_pixels_off():
     rough[:3, 3] += (0.0015, -0.0015, 0.002)
     assert base_evidence(images, views, cams, rough, MODEL) > MIN_EVIDENCE
     assert base_evidence(images, views, cams, swapped(rough, MODEL), MODEL) < -MIN_EVIDENCE
+
+
+def _base_pixel(cam, T_left_needle: np.ndarray, cams) -> np.ndarray:
+    T = invert(cam.T_world_cam) @ cams[0].T_world_cam @ T_left_needle
+    return project_cam(cam, transform_points(T, MODEL.base[None]))[0]
+
+
+def test_grey_at_an_end_touching_an_occluder_does_not_vote():
+    """The band hidden behind a jaw: only the visible grey end votes, and it is the tip."""
+    T = _pose()
+    images, views, cams = _scene(T, band_colour=GREY)
+    base_px = [_base_pixel(cam, T, cams) for cam in cams]
+
+    def hidden(eye: int, uv: np.ndarray) -> bool:
+        return bool(np.linalg.norm(uv - base_px[eye]) < 5.0)
+
+    assert base_evidence(images, views, cams, T, MODEL, end_hidden=hidden) > MIN_EVIDENCE
+    flipped = swapped(T, MODEL)
+    assert base_evidence(images, views, cams, flipped, MODEL, end_hidden=hidden) < -MIN_EVIDENCE
+
+
+def _band_cut_off(T: np.ndarray):
+    """Left image, its camera and a mask that lacks the band (a jaw cut it off)."""
+    images, views, cams = _scene(T)
+    cam = cams[0]
+    T_cam = invert(cam.T_world_cam) @ cams[0].T_world_cam @ T
+    band = rasterize_needle(cam, T_cam, BAND)
+    ys, xs = np.nonzero(views[0].mask & ~band)
+    crop = (views[0].mask & ~band)[ys.min() : ys.max() + 1, xs.min() : xs.max() + 1]
+    return images[0], MaskView(crop, (int(xs.min()), int(ys.min()))), band, cam
+
+
+def test_band_piece_cut_off_from_the_mask_is_added_back():
+    T = _pose()
+    img, view, band, cam = _band_cut_off(T)
+    out = with_band_pieces(img, view, 100.0, 0.05, cam, MODEL.wire_radius)
+    full = np.zeros(img.shape[:2], bool)
+    h, w = out.mask.shape
+    full[out.origin[1] : out.origin[1] + h, out.origin[0] : out.origin[0] + w] = out.mask
+    assert full[band].all()
+    assert (full & ~band).sum() == view.mask.sum()
+
+
+def test_violet_blobs_too_far_or_too_large_are_not_band():
+    T = _pose()
+    img, view, band, cam = _band_cut_off(T)
+    xs, ys = view.origin
+    far = img.copy()
+    far[band] = PINK
+    far[:10, :10] = VIOLET  # a small violet square far from the needle
+    out = with_band_pieces(far, view, 40.0, 0.05, cam, MODEL.wire_radius)
+    assert out.mask.sum() == view.mask.sum()
+    big = img.copy()
+    big[ys - 60 : ys - 20, xs : xs + 200] = VIOLET  # a large violet plate
+    big[band] = PINK
+    out = with_band_pieces(big, view, 100.0, 0.05, cam, MODEL.wire_radius)
+    assert out.mask.sum() == view.mask.sum()

@@ -9,10 +9,15 @@ brightness.
 
 from __future__ import annotations
 
+from collections.abc import Callable
+
+import cv2
 import numpy as np
 
 from suture_bt.geometry import NeedleModel
 from suture_bt.interfaces import CameraModel
+from suture_bt.perception.colour_refine import ColourRule, needle_coloured
+from suture_bt.perception.needle_projection import project_cam, transform_points
 from suture_bt.perception.pose_fit import MaskView
 from suture_bt.transforms import invert
 
@@ -51,6 +56,67 @@ def violet_score(rgb: np.ndarray) -> np.ndarray:
     return (0.5 * (c[..., 0] + c[..., 2]) - c[..., 1]) / level
 
 
+#: Largest band piece (px) relative to the band's area seen at the given depth: a bigger violet
+#: blob is not the band.
+MAX_BAND_AREA_RATIO = 2.0
+#: The band's length along the wire (m): the swage end of the needle.
+BAND_LENGTH = 0.003
+
+
+def with_band_pieces(
+    rgb: np.ndarray,
+    view: MaskView,
+    reach_px: float,
+    min_depth: float,
+    cam: CameraModel,
+    wire_radius: float,
+    rule: ColourRule | None = None,
+) -> MaskView:
+    """The mask plus violet band pieces within ``reach_px`` of its box.
+
+    The network's coarse mask can miss the band where a jaw cuts it off from the rest of the
+    needle (a small piece on its own); the band is the needle's base end, so it is the most
+    telling piece of all. A piece counts when it is violet, passes the needle colour test, has
+    at least ``MIN_BAND_PIXELS`` pixels and is no larger than the band can look at ``min_depth``.
+    """
+    rule = rule or ColourRule()
+    H, W = rgb.shape[:2]
+    h, w = view.mask.shape
+    if h == 0 or w == 0:
+        return view
+    x0, y0 = view.origin
+    r = int(np.ceil(reach_px))
+    a, b = max(x0 - r, 0), min(x0 + w + r, W)
+    c, d = max(y0 - r, 0), min(y0 + h + r, H)
+    crop = np.ascontiguousarray(rgb[c:d, a:b])
+    # violet_score > BAND_PIXEL_SCORE as one linear test (fast in OpenCV; negatives clip to 0).
+    k = BAND_PIXEL_SCORE / 3.0
+    weights = np.array([[0.5 - k, -1.0 - k, 0.5 - k]], np.float32)
+    ys, xs = np.nonzero(cv2.transform(crop, weights).reshape(crop.shape[:2]))
+    if len(xs) < MIN_BAND_PIXELS:
+        return view
+    grey = needle_coloured(crop[ys, xs][None], rule)[0]
+    ys, xs = ys[grey], xs[grey]
+    if len(xs) < MIN_BAND_PIXELS:
+        return view
+    band = np.zeros(crop.shape[:2], np.uint8)
+    band[ys, xs] = 1
+    n, lab, stats, _ = cv2.connectedComponentsWithStats(band, connectivity=8)
+    max_area = MAX_BAND_AREA_RATIO * BAND_LENGTH * 2.0 * wire_radius * (cam.fx / min_depth) ** 2
+    area = stats[1:, cv2.CC_STAT_AREA]
+    near = 1 + np.nonzero((area >= MIN_BAND_PIXELS) & (area <= max_area))[0]
+    if len(near) == 0:
+        return view
+    grown = np.zeros((d - c, b - a), bool)
+    grown[y0 - c : y0 - c + h, x0 - a : x0 - a + w] = view.mask
+    pieces = np.isin(lab, near)
+    if not np.any(pieces & ~grown):
+        return view
+    ys, xs = np.nonzero(grown | pieces)
+    u0, u1, v0, v1 = xs.min(), xs.max() + 1, ys.min(), ys.max() + 1
+    return MaskView((grown | pieces)[v0:v1, u0:u1], (a + int(u0), c + int(v0)))
+
+
 def _end_score(
     rgb: np.ndarray, view: MaskView, cam: CameraModel, T_cam_needle: np.ndarray, arcs: np.ndarray
 ) -> float | None:
@@ -82,6 +148,18 @@ def _end_score(
     return float(np.median(violet_score(rgb[sel[:, 1], sel[:, 0]])))
 
 
+def band_pixels(rgb: np.ndarray, view: MaskView) -> np.ndarray | None:
+    """The mask's violet (band) pixels as (u, v) rows; None when fewer than MIN_BAND_PIXELS."""
+    ys, xs = np.nonzero(view.mask)
+    if len(xs) == 0:
+        return None
+    pix = rgb[ys + view.origin[1], xs + view.origin[0]]
+    band = violet_score(pix) > BAND_PIXEL_SCORE
+    if band.sum() < MIN_BAND_PIXELS:
+        return None
+    return np.stack([xs[band] + view.origin[0], ys[band] + view.origin[1]], 1).astype(float)
+
+
 def _band_position_vote(
     rgb: np.ndarray, view: MaskView, cam: CameraModel, T_cam_needle: np.ndarray, model
 ) -> float | None:
@@ -90,19 +168,14 @@ def _band_position_vote(
     Unlike the end scores this needs only a rough fit (a pose a few pixels off, e.g. a needle
     seen edge-on), since the ends are far apart compared with the fit's error.
     """
-    ys, xs = np.nonzero(view.mask)
-    if len(xs) == 0:
-        return None
-    pix = rgb[ys + view.origin[1], xs + view.origin[0]]
-    band = violet_score(pix) > BAND_PIXEL_SCORE
-    if band.sum() < MIN_BAND_PIXELS:
+    p = band_pixels(rgb, view)
+    if p is None:
         return None
     ends = np.stack([model.base, model.tip]) @ T_cam_needle[:3, :3].T + T_cam_needle[:3, 3]
     if np.any(ends[:, 2] <= 0):
         return None
     u = cam.fx * ends[:, 0] / ends[:, 2] + cam.cx
     v = cam.fy * ends[:, 1] / ends[:, 2] + cam.cy
-    p = np.stack([xs[band] + view.origin[0], ys[band] + view.origin[1]], 1).astype(float)
     d_base = float(np.median(np.hypot(p[:, 0] - u[0], p[:, 1] - v[0])))
     d_tip = float(np.median(np.hypot(p[:, 0] - u[1], p[:, 1] - v[1])))
     return float(np.clip((d_tip - d_base) / max(d_tip + d_base, 1.0), -1.0, 1.0))
@@ -114,12 +187,15 @@ def base_evidence(
     cams: tuple[CameraModel, CameraModel],
     T_cam_needle: np.ndarray,
     model: NeedleModel,
+    end_hidden: Callable[[int, np.ndarray], bool] | None = None,
 ) -> float:
     """Mean vote of both eyes: violet at the fitted base, grey at the fitted tip and violet
     pixels nearer the fitted base than the tip vote > 0 (base and tip right), the opposite < 0
     (swapped); 0 when nothing is seen.
 
     ``T_cam_needle`` is in the first camera's frame; ``cams[1]`` is placed relative to it.
+    ``end_hidden(eye, uv)`` tells whether an end pixel touches an occluder: grey there only
+    says the band is out of sight, so it does not vote (violet still does).
     """
     n = max(3, int(np.ceil(END_ARC / model.radius / 0.02)))
     da = END_ARC / model.radius
@@ -127,10 +203,16 @@ def base_evidence(
     tip_arc = model.point_at(np.linspace(model.tip_angle, model.tip_angle + da, n))
     T_first_world = invert(cams[0].T_world_cam)
     votes = []
-    for rgb, view, cam in zip(images, views, cams, strict=True):
+    for eye, (rgb, view, cam) in enumerate(zip(images, views, cams, strict=True)):
         T = invert(cam.T_world_cam) @ invert(T_first_world) @ T_cam_needle
         sb = _end_score(rgb, view, cam, T, base_arc)
         st = _end_score(rgb, view, cam, T, tip_arc)
+        if end_hidden is not None:
+            ends_uv = project_cam(cam, transform_points(T, np.stack([model.base, model.tip])))
+            if sb is not None and sb < VIOLET_THRESHOLD and end_hidden(eye, ends_uv[0]):
+                sb = None
+            if st is not None and st < VIOLET_THRESHOLD and end_hidden(eye, ends_uv[1]):
+                st = None
         # Each visible end votes: violet where the fit put the base, grey where it put the tip.
         if sb is not None:
             votes.append(sb - VIOLET_THRESHOLD)
