@@ -539,7 +539,7 @@ class PoseFitter:
         it1, it2, it3 = self.iterations
         x, c1 = levenberg_marquardt(starts, coarse, self.stereo, self.model, it1, 3.0, terms)
         if self.n_second_stage and len(x) > self.n_second_stage:
-            x = x[np.argsort(c1)[: self.n_second_stage]]
+            x = x[self._diverse(x, c1, self.n_second_stage)]
         x, c = levenberg_marquardt(x, mid, self.stereo, self.model, it2, 1.0, terms)
         c = np.where(self._in_range(x), c, np.inf)
         if hidden_end is None:
@@ -596,6 +596,28 @@ class PoseFitter:
             ambiguity=amb,
             candidates=[params_to_pose(xx, cam, self.model) for xx in xf],
         )
+
+    def _diverse(self, x: np.ndarray, cost: np.ndarray, n: int) -> np.ndarray:
+        """Indices of n low-cost rows, clearly different solutions first (> DISTINCT apart or
+        with the centre > a radius apart): many starts fall into one basin, and copies of it
+        would crowd out the next-best basin (often the right one when an end is hidden)."""
+        order = [int(i) for i in np.argsort(cost) if np.isfinite(cost[i])]
+        if not order:
+            return np.argsort(cost)[:n]
+        T = params_to_pose(x[order], self.stereo.left, self.model)
+        picked: list[int] = []
+        for j in range(len(order)):
+            if len(picked) == n:
+                break
+            if all(
+                _rot_angle(T[j, :3, :3], T[k, :3, :3]) > DISTINCT
+                or np.linalg.norm(T[j, :3, 3] - T[k, :3, 3]) > self.model.radius
+                for k in picked
+            ):
+                picked.append(j)
+        rest = [j for j in range(len(order)) if j not in picked]
+        picked += rest[: n - len(picked)]
+        return np.array([order[j] for j in picked], int)
 
     def _in_range(self, x: np.ndarray) -> np.ndarray:
         """Which parameter rows put the arc centre within ``depth_range`` of the camera."""
