@@ -4,7 +4,9 @@ The pose fit explains the needle's outline, which is the same for a pose and its
 (a half turn about the arc's bisector). The base end carries a violet band, so the colour of
 the mask's pixels near each fitted end decides between the two: violet = (red + blue)/2 −
 green, relative to the pixel's level, is about 0.9 on the band and about 0 on the metal, at any
-brightness.
+brightness. A fitted end that touches an occluder only votes when it is violet (its grey may be
+the wire next to a hidden band). Band pieces that a jaw cuts off from the rest of the needle
+are put back into the mask (:func:`with_band_pieces`): the band is the most telling piece.
 """
 
 from __future__ import annotations
@@ -61,8 +63,6 @@ def violet_score(rgb: np.ndarray) -> np.ndarray:
 MAX_BAND_AREA_RATIO = 2.0
 #: The band's length along the wire (m): the swage end of the needle.
 BAND_LENGTH = 0.003
-
-
 #: Block size (px) of the cheap first look for violet, and the block score that is looked at
 #: closer (a band piece covering a quarter of a grey block still scores about 0.17).
 BAND_BLOCK = 4
@@ -88,10 +88,8 @@ def _violet_candidates(crop: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         return np.zeros(0, int), np.zeros(0, int)
     hit = cv2.dilate(hit.astype(np.uint8), np.ones((3, 3), np.uint8))
     by, bx = np.nonzero(hit)
-    d = np.arange(f)
-    ys = (by[:, None, None] * f + d[None, :, None]) + 0 * d[None, None, :]
-    xs = (bx[:, None, None] * f + d[None, None, :]) + 0 * d[None, :, None]
-    return ys.ravel(), xs.ravel()
+    dy, dx = np.mgrid[0:f, 0:f]
+    return (by[:, None] * f + dy.ravel()).ravel(), (bx[:, None] * f + dx.ravel()).ravel()
 
 
 def with_band_pieces(
@@ -132,7 +130,7 @@ def with_band_pieces(
     by0, bx0 = int(ys.min()), int(xs.min())
     band = np.zeros((int(ys.max()) - by0 + 1, int(xs.max()) - bx0 + 1), np.uint8)
     band[ys - by0, xs - bx0] = 1
-    n, lab, stats, _ = cv2.connectedComponentsWithStats(band, connectivity=8)
+    _, lab, stats, _ = cv2.connectedComponentsWithStats(band, connectivity=8)
     max_area = MAX_BAND_AREA_RATIO * BAND_LENGTH * 2.0 * wire_radius * (cam.fx / min_depth) ** 2
     area = stats[1:, cv2.CC_STAT_AREA]
     keep = 1 + np.nonzero((area >= MIN_BAND_PIXELS) & (area <= max_area))[0]

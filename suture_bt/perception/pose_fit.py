@@ -448,7 +448,8 @@ class PoseFitter:
     min_edge_points: int = 12
     seed: int = 0
     #: LM iterations: all kept starts at σ = 3 px on the coarse subsample, the best
-    #: ``n_second_stage`` at σ = 1 px on the mid one, then the best ``n_final`` clearly
+    #: ``n_second_stage`` (clearly different ones first, see ``_diverse``) at σ = 1 px on the
+    #: mid one, then the best ``n_final`` clearly
     #: different solutions on every edge point. Many cheap first-stage starts find the right
     #: basin more often than few expensive ones (1080p occluded benchmark, cached scenes:
     #: success 0.465 -> 0.495 at 134 -> 119 ms with 12 + 6 starts and 8 second-stage ones).
