@@ -7,6 +7,7 @@ from perception_helpers import pose_errors, random_needle_pose, stereo
 from scipy.spatial.transform import Rotation
 
 from suture_bt.geometry import NeedleModel
+from suture_bt.perception import pose_fit
 from suture_bt.perception.needle_projection import (
     pose_to_params,
     project_cam,
@@ -330,3 +331,25 @@ def test_second_stage_starts_are_distinct_basins_before_copies():
     assert list(fitter._diverse(x, cost, 2)) == [0, 3]
     assert list(fitter._diverse(x, cost, 3)) == [0, 3, 1]
     assert list(fitter._diverse(x, np.full(4, np.inf), 2)) == [0, 1]
+
+
+@pytest.mark.parametrize("ratio, n_seeds", [(0.0, 1), (1e6, 2)])
+def test_a_close_rival_also_seeds_the_second_search(monkeypatch, ratio, n_seeds):
+    """The second search starts from the best second-stage pose's ends and depth, and also
+    from a clearly different rival's when that costs at most RESEED_RIVAL_RATIO times more."""
+    st, T, left, right, ends = _scene_1080p(10, 0.0)
+    occ, short, _ = _tip_hidden(st, T, left, right, ends)
+    alt = [tuple(ends + np.array([[30.0, 10.0], [-20.0, 25.0]]))]
+    monkeypatch.setattr(pose_fit, "RESEED_RIVAL_RATIO", ratio)
+    calls = []
+    original = PoseFitter._starts
+
+    def spy(self, ub, ut, depth_hint):
+        calls.append(depth_hint)
+        return original(self, ub, ut, depth_hint)
+
+    monkeypatch.setattr(PoseFitter, "_starts", spy)
+    PoseFitter(st, MODEL).fit(*occ, short, alternatives=alt)
+    # One call for the main hypothesis, one per alternative, then the reseeds.
+    assert len(calls) == 2 + n_seeds
+    assert all(h is not None for h in calls[2:])
