@@ -87,17 +87,21 @@ def test_fit_recovers_known_pose_at_1080p(seed):
     np.testing.assert_allclose(res.T_world_needle, st.left.T_world_cam @ res.T_cam_needle)
 
 
+def _tip_disc_hidden(view: MaskView, ends, share: float) -> MaskView:
+    """The view with a disc of radius ``share`` × the end pixels' distance blanked around
+    the tip end (an occluder such as a jaw)."""
+    m = view.mask.copy()
+    c = ends[1] - np.array(view.origin)
+    r = share * np.linalg.norm(ends[1] - ends[0])
+    yy, xx = np.mgrid[: m.shape[0], : m.shape[1]]
+    m[(xx - c[0]) ** 2 + (yy - c[1]) ** 2 < r**2] = False
+    return MaskView(m, view.origin)
+
+
 def test_fit_tolerates_occlusion_of_a_third_of_the_needle():
     st, T, left, right, ends = _scene_1080p(7, 2.0)
-    occluded = []
-    for v, e in zip((left, right), (ends, ends), strict=True):
-        m = v.mask.copy()
-        # An occluder (e.g. a jaw) over the tip third: blank a disc around the tip.
-        c = e[1] - np.array(v.origin)
-        r = 0.35 * np.linalg.norm(e[1] - e[0])
-        yy, xx = np.mgrid[: m.shape[0], : m.shape[1]]
-        m[(xx - c[0]) ** 2 + (yy - c[1]) ** 2 < r**2] = False
-        occluded.append(MaskView(m, v.origin))
+    # An occluder (e.g. a jaw) over the tip third: blank a disc around the tip.
+    occluded = [_tip_disc_hidden(v, ends, 0.35) for v in (left, right)]
     res = PoseFitter(st, MODEL).fit(*occluded, tuple(ends))
     pos, ang = pose_errors(res.T_cam_needle, T)
     assert pos < 1.0 and ang < 3.0
@@ -233,14 +237,7 @@ def _tip_hidden(st, T, left, right, ends):
     """Both eyes' masks with a disc over the tip half (an occluder), and the left hypothesis
     that stops short: base keypoint and the visible piece's far end."""
     er = _right_ends(st, T)
-    occ = []
-    for v, e in ((left, ends), (right, er)):
-        m = v.mask.copy()
-        c = e[1] - np.array(v.origin)
-        r = 0.55 * np.linalg.norm(e[1] - e[0])
-        yy, xx = np.mgrid[: m.shape[0], : m.shape[1]]
-        m[(xx - c[0]) ** 2 + (yy - c[1]) ** 2 < r**2] = False
-        occ.append(MaskView(m, v.origin))
+    occ = [_tip_disc_hidden(left, ends, 0.55), _tip_disc_hidden(right, er, 0.55)]
     me = mask_ends(occ[0])
     far = me[int(np.argmax([np.linalg.norm(p - ends[0]) for p in me]))]
     return occ, (ends[0], far), er
