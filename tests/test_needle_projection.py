@@ -5,6 +5,7 @@ from perception_helpers import random_needle_pose, stereo
 
 from suture_bt.geometry import NeedleModel
 from suture_bt.perception.needle_projection import (
+    end_pixels,
     params_to_pose,
     phi_from_base_depth,
     pose_to_params,
@@ -25,6 +26,16 @@ def test_params_round_trip_reproduces_pose():
     np.testing.assert_allclose(back, poses, atol=1e-9)
     ends = project_cam(cam, transform_points(poses[0], np.stack([MODEL.base, MODEL.tip])))
     np.testing.assert_allclose(x[0, :4], ends.ravel(), atol=1e-9)
+
+
+def test_end_pixels_are_the_pinhole_images_of_base_and_tip():
+    cam = stereo(640, 480).left
+    T = np.eye(4)
+    T[:3, 3] = (0.01, -0.02, 0.1)
+    uv = end_pixels(cam, T, MODEL)
+    for row, p in zip(uv, (MODEL.base + T[:3, 3], MODEL.tip + T[:3, 3]), strict=True):
+        expected = (cam.fx * p[0] / p[2] + cam.cx, cam.fy * p[1] / p[2] + cam.cy)
+        np.testing.assert_allclose(row, expected, atol=1e-9)
 
 
 def test_phi_from_depth_puts_base_at_that_depth():

@@ -19,7 +19,7 @@ import numpy as np
 from suture_bt.geometry import NeedleModel
 from suture_bt.interfaces import CameraModel
 from suture_bt.perception.colour_refine import ColourRule, needle_coloured
-from suture_bt.perception.needle_projection import project_cam, transform_points
+from suture_bt.perception.needle_projection import end_pixels
 from suture_bt.perception.pose_fit import MaskView
 from suture_bt.transforms import invert
 
@@ -240,7 +240,7 @@ def base_evidence(
         sb = _end_score(rgb, view, cam, T, base_arc)
         st = _end_score(rgb, view, cam, T, tip_arc)
         if end_hidden is not None:
-            ends_uv = project_cam(cam, transform_points(T, np.stack([model.base, model.tip])))
+            ends_uv = end_pixels(cam, T, model)
             if sb is not None and sb < VIOLET_THRESHOLD and end_hidden(eye, ends_uv[0]):
                 sb = None
             if st is not None and st < VIOLET_THRESHOLD and end_hidden(eye, ends_uv[1]):

@@ -38,7 +38,7 @@ from suture_bt.perception.needle_ends import (
     swapped,
     with_band_pieces,
 )
-from suture_bt.perception.needle_projection import project_cam, transform_points
+from suture_bt.perception.needle_projection import end_pixels
 from suture_bt.perception.network import (
     INPUT_SIZE,
     OUTPUT_STRIDE,
@@ -432,10 +432,7 @@ class NeedleLocalizer:
         if abs(evidence) >= MIN_EVIDENCE:
             return (T_cam if evidence > 0 else swapped(T_cam, self.model)), evidence, "colour"
         if score[0, 0] >= MIN_KEYPOINT_SCORE:
-            ends = project_cam(
-                self.stereo.left,
-                transform_points(T_cam, np.stack([self.model.base, self.model.tip])),
-            )
+            ends = end_pixels(self.stereo.left, T_cam, self.model)
             d = np.linalg.norm(ends - kp[0, 0], axis=1)
             return (T_cam if d[0] <= d[1] else swapped(T_cam, self.model)), evidence, "keypoint"
         return T_cam, evidence, "none"

@@ -138,6 +138,11 @@ def transform_points(T: np.ndarray, pts: np.ndarray) -> np.ndarray:
     return pts @ T[:3, :3].T + T[:3, 3]
 
 
+def end_pixels(cam: CameraModel, T_cam_needle: np.ndarray, model: NeedleModel) -> np.ndarray:
+    """Pixels (2, 2) of the needle's base and tip ends under pose T_cam_needle."""
+    return project_cam(cam, transform_points(T_cam_needle, np.stack([model.base, model.tip])))
+
+
 def rasterize_needle(
     cam: CameraModel, T_cam_needle: np.ndarray, model: NeedleModel, n_samples: int = 800
 ) -> np.ndarray:

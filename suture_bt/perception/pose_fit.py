@@ -24,12 +24,11 @@ import numpy as np
 from suture_bt.geometry import NeedleModel
 from suture_bt.interfaces import StereoCameraModel
 from suture_bt.perception.needle_projection import (
+    end_pixels,
     params_to_pose,
     phi_from_base_depth,
     pixel_rays,
     pose_to_params,
-    project_cam,
-    transform_points,
 )
 from suture_bt.transforms import invert
 
@@ -511,10 +510,7 @@ class PoseFitter:
         mid = rays.subset(_balanced(nl, len(er), self.mid_points_per_eye, rng))
         cam = self.stereo.left
         if endpoints_left is None and warm_start is not None:
-            ends = transform_points(
-                np.asarray(warm_start), np.stack([self.model.base, self.model.tip])
-            )
-            endpoints_left = tuple(project_cam(cam, ends))
+            endpoints_left = tuple(end_pixels(cam, np.asarray(warm_start), self.model))
         terms = [FreeSpaceTerm(self.stereo, self.model, (left, right))]
         if end_priors is not None:
             terms.append(EndPriorTerm(self.stereo, self.model, end_priors))
@@ -560,10 +556,8 @@ class PoseFitter:
                 seeds = seeds[:1]
             st = []
             for T_best in params_to_pose(x[seeds], cam, self.model):
-                ends = project_cam(
-                    cam, transform_points(T_best, np.stack([self.model.base, self.model.tip]))
-                )
-                st.append(best_starts(tuple(ends), float(T_best[2, 3]), self.n_reseed))
+                ends = tuple(end_pixels(cam, T_best, self.model))
+                st.append(best_starts(ends, float(T_best[2, 3]), self.n_reseed))
             st = np.concatenate(st)
             if len(st):
                 y, cy = levenberg_marquardt(st, coarse, self.stereo, self.model, it1, 3.0, terms)
