@@ -1,6 +1,7 @@
 """The needle model reproduces the SRC geometry and scoring points (DESIGN.md §5)."""
 
 import numpy as np
+import pytest
 
 from suture_bt.geometry import NeedleModel
 from suture_bt.geometry.needle import SCORED_POINTS
@@ -34,3 +35,9 @@ def test_scored_points_follow_the_pose():
     T = make_transform(rpy_to_matrix((0.1, -0.2, 0.3)), (0.01, 0.02, 0.07))
     pts = NeedleModel().scored_points(T)
     np.testing.assert_allclose(pts["base"], T[:3, :3] @ [-0.0102, 0, 0] + T[:3, 3])
+
+
+def test_chord_is_the_distance_between_base_and_tip():
+    m = NeedleModel()
+    assert m.chord == pytest.approx(float(np.linalg.norm(m.base - m.tip)), abs=1e-12)
+    assert 0.017 < m.chord < 0.019  # about 18 mm for the SRC needle

@@ -37,6 +37,11 @@ class NeedleModel:
     def length(self) -> float:
         return self.radius * self.arc_angle
 
+    @property
+    def chord(self) -> float:
+        """Straight-line distance between base and tip (m): the needle's largest extent."""
+        return float(2.0 * self.radius * np.sin(0.5 * self.arc_angle))
+
     def point_at(self, angle) -> np.ndarray:
         """Points on the centre-line (needle frame) at the given arc angle(s)."""
         a = np.asarray(angle, dtype=float)

@@ -194,8 +194,7 @@ class NeedleLocalizer:
         """Scores with the weaker keypoint of an eye zeroed when the two are farther apart than
         the needle's chord can appear (at the nearest working distance): one of them then sits
         on something else, e.g. a jaw tip, and would pick the wrong blob as the needle."""
-        chord = float(np.linalg.norm(self.model.base - self.model.tip))
-        max_px = MAX_CHORD_MARGIN * chord * self.stereo.left.fx / MIN_DEPTH
+        max_px = MAX_CHORD_MARGIN * self.model.chord * self.stereo.left.fx / MIN_DEPTH
         out = score.copy()
         for eye in (0, 1):
             if out[eye].min() >= MIN_KEYPOINT_SCORE:
@@ -287,7 +286,7 @@ class NeedleLocalizer:
         (None: the largest coarse blob is the needle).
         """
         # Pieces of one needle lie within its chord of each other, at the nearest distance.
-        chord = float(np.linalg.norm(self.model.base - self.model.tip))
+        chord = self.model.chord
         max_gap = chord * self.stereo.left.fx / MIN_DEPTH / scale
         raw = []
         for eye, img in enumerate(images):
