@@ -32,7 +32,8 @@ from suture_bt.perception.needle_projection import (
 )
 from suture_bt.transforms import invert
 
-#: Finite-difference steps of the six parameters (px, px, px, px, rad, rad).
+#: Finite-difference steps of the six parameters (px, px, px, px, rad, rad) for the pose's
+#: derivatives and the extra terms' (the edge residuals' derivatives are analytic).
 FD_STEPS = np.array([0.02, 0.02, 0.02, 0.02, 2e-5, 2e-4])
 #: A clearly different second-stage pose costing at most this much more than the best also
 #: seeds the second search (1.3 gave the same answers on the benchmarks for 10 ms more).
@@ -235,37 +236,39 @@ def edge_rays(stereo: StereoCameraModel, left_uv: np.ndarray, right_uv: np.ndarr
 
 
 def _to_needle(T: np.ndarray, rays: EdgeRays) -> tuple[np.ndarray, np.ndarray]:
-    """Ray origins and directions in each pose's needle frame: (K, N, 3) each."""
+    """Ray origins and directions in each pose's needle frame, component first: (3, K, N) each
+    (contiguous components keep the arc maths below fast)."""
     R, p = T[:, :3, :3], T[:, :3, 3]
     o = np.matmul(rays.origins[None] - p[:, None], R)
     d = np.matmul(rays.dirs[None], R)
-    return o, d
+    return np.ascontiguousarray(o.transpose(2, 0, 1)), np.ascontiguousarray(d.transpose(2, 0, 1))
 
 
-def _arc_f(theta, o, d, r, cs=None):
+def _arc_f(theta, o, d, r):
     """Squared distance f from the arc point at theta to each ray's line, and its along-ray t.
 
-    ``cs`` = (cos θ, sin θ) when already known.
+    ``o``, ``d``: component-first ray origins and directions in the needle frame (see
+    :func:`_to_needle`).
     """
-    c, s = (np.cos(theta), np.sin(theta)) if cs is None else cs
-    a, b = r * c - o[..., 0], r * s - o[..., 1]
-    qd = a * d[..., 0] + b * d[..., 1] - o[..., 2] * d[..., 2]
-    return a * a + b * b + o[..., 2] ** 2 - qd * qd, qd
-
-
-def _arc_terms(theta, o, d, r):
-    """Squared ray-to-point distance f and its first two derivatives in theta."""
     c, s = np.cos(theta), np.sin(theta)
-    a, b = r * c - o[..., 0], r * s - o[..., 1]
-    qd = a * d[..., 0] + b * d[..., 1] - o[..., 2] * d[..., 2]
-    f = a * a + b * b + o[..., 2] ** 2 - qd * qd
-    ap, bp = -r * s, r * c
-    qdp = ap * d[..., 0] + bp * d[..., 1]
-    fp = 2 * (a * ap + b * bp) - 2 * qd * qdp
-    app, bpp = -r * c, -r * s
-    qdpp = app * d[..., 0] + bpp * d[..., 1]
-    fpp = 2 * (ap * ap + bp * bp + a * app + b * bpp) - 2 * (qdp * qdp + qd * qdpp)
-    return f, fp, fpp, qd
+    a, b = r * c - o[0], r * s - o[1]
+    qd = a * d[0] + b * d[1] - o[2] * d[2]
+    return a * a + b * b + o[2] * o[2] - qd * qd, qd
+
+
+def _newton_step(theta, o, d, od, r):
+    """Newton step f'/f'' of the squared ray distance f in theta, 0 where f is not convex.
+
+    With u = cos θ d0 + sin θ d1, v = cos θ d1 - sin θ d0 and the along-ray distance
+    qd = r u - o·d: f'/2r = o0 sin θ - o1 cos θ - qd v, f''/2r = o0 cos θ + o1 sin θ - r v² + qd u.
+    """
+    c, s = np.cos(theta), np.sin(theta)
+    u = c * d[0] + s * d[1]
+    v = c * d[1] - s * d[0]
+    qd = r * u - od
+    num = o[0] * s - o[1] * c - qd * v
+    den = o[0] * c + o[1] * s - r * v * v + qd * u
+    return np.where(den > 0, num / np.where(den > 0, den, 1.0), 0.0)
 
 
 def nearest_arc_angle(
@@ -278,18 +281,28 @@ def nearest_arc_angle(
     """Arc angle (K, N) of the centre-line point nearest each ray (clamped to the arc's ends).
 
     A grid search then Newton steps; with ``start`` (angles of a nearby pose) Newton only.
+    ``o``, ``d`` are component first (see :func:`_to_needle`).
     """
     lo, hi = model.tip_angle, model.base_angle
+    r = model.radius
+    od = o[0] * d[0] + o[1] * d[1] + o[2] * d[2]
     if start is None:
+        # f(θ) = r² + |o|² - 2r (o0 cos θ + o1 sin θ) - (r (d0 cos θ + d1 sin θ) - o·d)²: the
+        # θ-dependent part for every grid angle at once by two small matrix products.
         g = np.linspace(lo, hi, grid)
-        f, _ = _arc_f(g[None, None, :], o[..., None, :], d[..., None, :], model.radius)
-        theta = g[np.argmin(f, -1)]
+        cs = np.stack([np.cos(g), np.sin(g)])
+        m = np.stack([o[0], o[1]], -1) @ cs
+        q = np.stack([d[0], d[1]], -1) @ cs
+        q *= r
+        q -= od[..., None]
+        q *= q
+        m *= -2 * r
+        m -= q
+        theta = g[np.argmin(m, -1)]
     else:
         theta = start
     for _ in range(2):
-        _, fp, fpp, _ = _arc_terms(theta, o, d, model.radius)
-        step = np.where(fpp > 0, fp / np.where(fpp > 0, fpp, 1.0), 0.0)
-        step = np.clip(step, -(hi - lo) / grid, (hi - lo) / grid)
+        step = np.clip(_newton_step(theta, o, d, od, r), -(hi - lo) / grid, (hi - lo) / grid)
         theta = np.clip(theta - step, lo, hi)
     return theta
 
@@ -301,21 +314,51 @@ def residuals(
     theta: np.ndarray | None = None,
     theta_start: np.ndarray | None = None,
     grid: int = N_THETA_GRID,
-    cs: tuple[np.ndarray, np.ndarray] | None = None,
 ):
     """Edge residuals (K, N) in pixels for poses T (K, 4, 4); also the arc angles used.
 
-    ``theta`` fixes the nearest-point angles (for finite differences); ``theta_start`` seeds
-    their Newton search from a nearby pose's angles.
+    ``theta`` fixes the nearest-point angles; ``theta_start`` seeds their Newton search from a
+    nearby pose's angles.
     """
     o, d = _to_needle(T, rays)
     if theta is None:
         theta = nearest_arc_angle(o, d, model, grid=grid, start=theta_start)
-    f, qd = _arc_f(theta, o, d, model.radius, cs)
+    f, qd = _arc_f(theta, o, d, model.radius)
     dist = np.sqrt(np.maximum(f, 0.0))
     depth = qd * rays.dz[None]
     r = (dist - model.wire_radius) * rays.focal[None] / np.where(depth > 1e-6, depth, np.nan)
     return r, theta
+
+
+def edge_jacobian(
+    T: np.ndarray, dT: np.ndarray, rays: EdgeRays, model: NeedleModel, theta: np.ndarray
+) -> np.ndarray:
+    """Jacobian (K, P, N) of the edge residuals at poses T (K, 4, 4), given the poses'
+    derivatives dT (K, P, 4, 4) in P parameters.
+
+    The nearest-point angles stay fixed: the distance is stationary in them (exactly so at
+    interior points; clamped end points do not move). For a ray with unit direction d through
+    the arc point X, offset a = X - origin, along-ray distance qd = a·d, perpendicular
+    e = a - qd d and residual r = (|e| - wire radius) f / (qd d_z):
+    dr/dX = f / (qd d_z) (e / |e| - (|e| - wire radius) / qd · d). With X = R P(θ) + p, in the
+    needle frame R^T dX = (R^T dR) P + R^T dp: one small batched matrix product per start.
+    """
+    o, d = _to_needle(T, rays)
+    r = model.radius
+    P = (r * np.cos(theta), r * np.sin(theta))
+    a = (P[0] - o[0], P[1] - o[1], -o[2])
+    qd = a[0] * d[0] + a[1] * d[1] + a[2] * d[2]
+    e = [a[i] - qd * d[i] for i in range(3)]
+    dist = np.sqrt(e[0] * e[0] + e[1] * e[1] + e[2] * e[2])
+    k = rays.focal[None] / (qd * rays.dz[None])
+    inv = 1.0 / np.maximum(dist, 1e-12)
+    along = (dist - model.wire_radius) / qd
+    g = [k * (e[i] * inv - along * d[i]) for i in range(3)]
+    H = np.stack([g[i] * P[n] for i in range(3) for n in range(2)] + g, -1)  # (K, N, 9)
+    R = T[:, :3, :3]
+    A = np.einsum("kmi,kjmn->kjin", R, dT[..., :3, :2]).reshape(*dT.shape[:2], 6)
+    b = np.einsum("kmi,kjm->kji", R, dT[..., :3, 3])
+    return np.concatenate([A, b], -1) @ H.transpose(0, 2, 1)
 
 
 #: Robust losses of the fit: Cauchy (outliers grow logarithmically; a wide basin for the
@@ -367,9 +410,11 @@ def levenberg_marquardt(
         r, th = residuals(T, rays, model, *a, **k)
         return (np.concatenate([r] + [e(T) for e in extras], 1) if extras else r), th
 
-    r, theta = both(params_to_pose(x, cam, model))
+    T = params_to_pose(x, cam, model)
+    r, theta = both(T)
     cost = robust_cost(r, sigma, colw, loss)
     lam = np.full(len(x), 1e-2)
+    n_edge = len(rays)
     for _ in range(iters):
         ok = np.isfinite(cost)
         if not ok.any():
@@ -377,14 +422,15 @@ def levenberg_marquardt(
         w = colw * _irls_weights(r, sigma, loss)
         w = np.where(np.isfinite(w), w, 0.0)
         rr = np.where(np.isfinite(r), r, 0.0)
-        xs = x[:, None, :] + np.diag(FD_STEPS)[None]
-        th6 = np.repeat(theta, 6, 0)
-        rp, _ = both(
-            params_to_pose(xs.reshape(-1, 6), cam, model).reshape(-1, 4, 4),
-            th6,
-            cs=(np.cos(th6), np.sin(th6)),
-        )
-        J = (rp.reshape(len(x), 6, -1) - rr[:, None]) / FD_STEPS[None, :, None]  # (K, 6, N)
+        # Pose derivatives by finite differences (cheap: 6 poses per start), residual
+        # derivatives analytically for the edge points, by differences for the extra terms.
+        T6 = params_to_pose(x[:, None, :] + np.diag(FD_STEPS)[None], cam, model)
+        dT = (T6 - T[:, None]) / FD_STEPS[None, :, None, None]
+        J = edge_jacobian(T, dT, rays, model, theta)
+        if extras:
+            re = np.concatenate([e(T6.reshape(-1, 4, 4)) for e in extras], 1)
+            re = re.reshape(len(x), 6, -1) - rr[:, None, n_edge:]
+            J = np.concatenate([J, re / FD_STEPS[None, :, None]], 2)
         J = np.where(np.isfinite(J), J, 0.0)
         Jw = J * w[:, None, :]
         A = Jw @ J.transpose(0, 2, 1)
@@ -396,11 +442,13 @@ def levenberg_marquardt(
         except np.linalg.LinAlgError:
             break
         xn = x + delta
-        rn, thn = both(params_to_pose(xn, cam, model), theta_start=theta)
+        Tn = params_to_pose(xn, cam, model)
+        rn, thn = both(Tn, theta_start=theta)
         cn = robust_cost(rn, sigma, colw, loss)
         better = cn < cost
-        x[better], r[better], theta[better], cost[better] = (
+        x[better], T[better], r[better], theta[better], cost[better] = (
             xn[better],
+            Tn[better],
             rn[better],
             thn[better],
             cn[better],
