@@ -117,21 +117,38 @@ def _reason_kind(reason: str) -> str:
     return reason
 
 
+def _group_figures(sub: list[dict]) -> dict:
+    """Scenes, success rate and mean errors (over estimates) of a group of scenes."""
+    est = [r for r in sub if r["found"]]
+    return {
+        "scenes": len(sub),
+        "not_found": len(sub) - len(est),
+        "success_rate": float(
+            np.mean([r["found"] and r["pos_mm"] < 2.0 and r["ang_deg"] < 5.0 for r in sub])
+        ),
+        "mean_pos_err_mm": float(np.mean([r["pos_mm"] for r in est])) if est else None,
+        "mean_ang_err_deg": float(np.mean([r["ang_deg"] for r in est])) if est else None,
+    }
+
+
 def _by_scenario(rows: list[dict]) -> dict:
-    """Scenes, success rate and mean errors (over estimates) per scenario."""
+    """Figures per scenario (resting, held, in a port, ...)."""
+    keys = sorted({r["scenario"] for r in rows})
+    return {k: _group_figures([r for r in rows if r["scenario"] == k]) for k in keys}
+
+
+#: Bins of the needle's visible share in the left image for the per-visibility figures.
+VISIBLE_BINS = ((0.0, 0.6), (0.6, 0.8), (0.8, 0.97), (0.97, 1.01))
+
+
+def _by_visible_share(rows: list[dict]) -> dict:
+    """Figures per bin of the needle's visible share ("0.60-0.80"), empty bins left out:
+    how accuracy falls as more of the needle is hidden."""
     out = {}
-    for k in sorted({r["scenario"] for r in rows}):
-        sub = [r for r in rows if r["scenario"] == k]
-        est = [r for r in sub if r["found"]]
-        out[k] = {
-            "scenes": len(sub),
-            "not_found": len(sub) - len(est),
-            "success_rate": float(
-                np.mean([r["found"] and r["pos_mm"] < 2.0 and r["ang_deg"] < 5.0 for r in sub])
-            ),
-            "mean_pos_err_mm": float(np.mean([r["pos_mm"] for r in est])) if est else None,
-            "mean_ang_err_deg": float(np.mean([r["ang_deg"] for r in est])) if est else None,
-        }
+    for lo, hi in VISIBLE_BINS:
+        sub = [r for r in rows if lo <= r["visible"] < hi]
+        if sub:
+            out[f"{lo:.2f}-{min(hi, 1.0):.2f}"] = _group_figures(sub)
     return out
 
 
@@ -169,6 +186,7 @@ def _summary(rows: list[dict]) -> dict:
         },
         "scenarios": {k: sum(r["scenario"] == k for r in rows) for k in sorted(SCEN_NAMES)},
         "by_scenario": _by_scenario(rows),
+        "by_visible_share": _by_visible_share(rows),
         "mean_ang_err_mod_swap_deg": float(sym.mean()),
         "success_rate_mod_swap": float(np.mean(ok_sym)),
         "depth_mm_range": [
