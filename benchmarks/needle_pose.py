@@ -111,6 +111,7 @@ def _reason_kind(reason: str) -> str:
         "mm from the camera",
         "every start failed",
         "too few needle edge points",
+        "which end is the base cannot be told",
     ):
         if kind in reason:
             return kind
@@ -182,7 +183,7 @@ def _summary(rows: list[dict]) -> dict:
         "success_rate": float(np.mean(ok)),
         "base_tip_swapped": int(np.sum((ang > 90) & (sym < 10))),
         "ends_decided_by": {
-            k: sum(r["end_decided_by"] == k for r in est) for k in ("colour", "keypoint", "none")
+            k: sum(r["end_decided_by"] == k for r in est) for k in ("colour", "previous")
         },
         "scenarios": {k: sum(r["scenario"] == k for r in rows) for k in sorted(SCEN_NAMES)},
         "by_scenario": _by_scenario(rows),

@@ -4,11 +4,14 @@ bad inputs a clear ValueError, and (with the shipped weights) a rendered needle 
 import numpy as np
 import pytest
 import torch
-from perception_helpers import pose_errors, stereo
+from perception_helpers import pose_errors, random_needle_pose, stereo
 
+from suture_bt.perception.needle_ends import swapped
 from suture_bt.perception.needle_localizer import NeedleLocalizer
+from suture_bt.perception.needle_projection import rasterize_needle
 from suture_bt.perception.network import DEFAULT_WEIGHTS, NeedleNet
-from suture_bt.perception.pose_fit import NeedleNotFound
+from suture_bt.perception.pose_fit import MaskView, NeedleNotFound
+from suture_bt.transforms import invert
 
 
 def _blind_net() -> NeedleNet:
@@ -131,3 +134,25 @@ def test_keypoints_farther_apart_than_the_needle_can_appear_keep_only_the_strong
     assert score[0, 1] == 0.47  # the raw scores are left alone
     far_weak = np.array([[0.1, 0.9], [0.6, 0.7]])  # an untrusted keypoint is no rival
     np.testing.assert_array_equal(loc._plausible(kp, far_weak), far_weak)
+
+
+def test_without_the_band_the_ends_follow_the_previous_estimate_or_are_refused():
+    """A needle whose swage band is not seen: base and tip look alike, so the localiser keeps
+    the orientation nearer the previous estimate, and without one refuses to guess."""
+    st = stereo(960, 540)
+    loc = NeedleLocalizer(st, net=_blind_net())
+    T = random_needle_pose(np.random.default_rng(3), 0.08, 0.12)
+    images, views = [], []
+    for cam in (st.left, st.right):
+        mask = rasterize_needle(cam, invert(cam.T_world_cam) @ st.left.T_world_cam @ T, loc.model)
+        img = np.empty((540, 960, 3), np.uint8)
+        img[:] = (215, 140, 132)
+        img[mask] = (158, 161, 168)  # grey all along: no violet band
+        images.append(img)
+        views.append(MaskView(mask))
+    with pytest.raises(NeedleNotFound, match="which end is the base"):
+        loc._orient(T, images, views, 3.0, None)
+    for previous in (T, swapped(T, loc.model)):
+        out, _, decided_by = loc._orient(T, images, views, 3.0, previous)
+        assert decided_by == "previous"
+        np.testing.assert_allclose(out, previous, atol=1e-9)

@@ -9,6 +9,7 @@ from suture_bt.perception.occlusion import (
     end_is_occluded,
     extended_ends,
     with_occluder,
+    without_occluder_rims,
 )
 from suture_bt.perception.pose_fit import MaskView
 
@@ -75,3 +76,43 @@ def test_occluder_marks_the_jaw_beside_the_mask_not_the_tissue():
     assert occ[100 - y0, 203 - x0] and occ[100 - y0, 202 - x0]  # jaw and the gap pixel next to it
     assert not occ[view.mask].any()
     assert not occ[100 - y0, 95 - x0]  # tissue left of the wire
+
+
+def _wire_jaw_rim_and_stub():
+    """A wire (y 98-102, x 100-200) left of a grey jaw (x 203-240, y 60-140); in the mask too: a
+    3-px sliver of the jaw's lit rim along its top (y 57-59) and a wire stub leaving the jaw's
+    right side (x 241-260)."""
+    img = np.empty((200, 320, 3), np.uint8)
+    img[:] = PINK
+    mask = np.zeros((200, 320), bool)
+    mask[98:103, 100:201] = True
+    img[60:141, 203:241] = GREY
+    mask[57:60, 203:241] = True  # the rim sliver, taken as needle
+    mask[98:103, 241:261] = True  # the wire emerging behind the jaw
+    img[mask] = GREY
+    view = MaskView(mask[50:150, 90:270], (90, 50))
+    return img, with_occluder(img, view, RULE)
+
+
+def test_a_sliver_along_the_jaws_outline_is_dropped_but_a_piece_leaving_it_is_kept():
+    img, view = _wire_jaw_rim_and_stub()
+    out = without_occluder_rims(img, view, RULE)
+    full = np.zeros((200, 320), bool)
+    full[50:150, 90:270] = out.mask
+    assert not full[57:60, 203:241].any()
+    assert full[98:103, 100:201].all() and full[98:103, 241:261].all()
+    # The rim's pixels are now part of the occluder, whose edge the fit ignores.
+    occ = np.zeros((200, 320), bool)
+    occ[50:150, 90:270] = out.occluder
+    assert occ[57:60, 203:241].all()
+
+
+def test_the_largest_piece_is_kept_even_when_it_hugs_an_occluder():
+    img, view = _wire_jaw_rim_and_stub()
+    rims = np.zeros((200, 320), bool)
+    rims[57:60, 203:241] = True  # along the jaw's top: the largest piece
+    rims[141:144, 210:220] = True  # a short one along its bottom
+    view = with_occluder(img, MaskView(rims[50:150, 90:270], view.origin), RULE)
+    out = np.zeros((200, 320), bool)
+    out[50:150, 90:270] = without_occluder_rims(img, view, RULE).mask
+    assert out[57:60, 203:241].all() and not out[141:144, 210:220].any()
