@@ -229,9 +229,11 @@ class NeedleLocalizer:
     def localize(
         self, left: np.ndarray, right: np.ndarray, previous: np.ndarray | None = None
     ) -> NeedleEstimate:
-        """Estimate the needle pose; ``previous`` (T_cam_needle) warm-starts the fit.
+        """Estimate the needle pose; ``previous`` (T_cam_needle) warm-starts the fit and, when
+        the swage band is not seen, says which end is the base (a tracked or held needle).
 
-        Raises :class:`NeedleNotFound` (with a reason) when the needle is not visible enough.
+        Raises :class:`NeedleNotFound` (with a reason) when the needle is not visible enough,
+        including when base and tip cannot be told apart and there is no ``previous``.
         """
         t0 = time.perf_counter()
         prob, kp, raw_score, scale = self.network(left, right)
