@@ -96,7 +96,7 @@ def _wire_jaw_rim_and_stub():
 
 def test_a_sliver_along_the_jaws_outline_is_dropped_but_a_piece_leaving_it_is_kept():
     img, view = _wire_jaw_rim_and_stub()
-    out = without_occluder_rims(img, view, RULE)
+    out = without_occluder_rims(img, view, RULE, 3)
     full = np.zeros((200, 320), bool)
     full[50:150, 90:270] = out.mask
     assert not full[57:60, 203:241].any()
@@ -114,5 +114,19 @@ def test_the_largest_piece_is_kept_even_when_it_hugs_an_occluder():
     rims[141:144, 210:220] = True  # a short one along its bottom
     view = with_occluder(img, MaskView(rims[50:150, 90:270], view.origin), RULE)
     out = np.zeros((200, 320), bool)
-    out[50:150, 90:270] = without_occluder_rims(img, view, RULE).mask
+    out[50:150, 90:270] = without_occluder_rims(img, view, RULE, 3).mask
     assert out[57:60, 203:241].all() and not out[141:144, 210:220].any()
+
+
+def test_a_piece_beside_the_needles_own_thin_fringe_is_kept():
+    """Grey pixels the mask left out along a wire piece (its own anti-aliased fringe) are not
+    an occluder: too thin to hide anything, so the piece they line stays."""
+    img, view = _wire_jaw_rim_and_stub()
+    mask = np.zeros((200, 320), bool)
+    mask[98:103, 100:201] = True
+    mask[150:153, 120:130] = True  # a short piece of wire ...
+    img[153:155, 118:132] = GREY  # ... lined by a 2-px grey fringe left out of the mask
+    view = with_occluder(img, MaskView(mask[50:170, 90:270], (90, 50)), RULE)
+    out = np.zeros((200, 320), bool)
+    out[50:170, 90:270] = without_occluder_rims(img, view, RULE, 3).mask
+    assert out[150:153, 120:130].all()

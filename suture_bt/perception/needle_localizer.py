@@ -90,6 +90,9 @@ MAX_DEPTH = 0.35
 DEPTH_AGREEMENT = 0.3
 #: Never treat a blob thinner than this (half width, px) as thicker than the wire.
 MIN_HALF_WIDTH_PX = 1.5
+#: Reach (in gate half-widths) within which a mask piece hugging an occluder counts as its rim
+#: (:func:`~suture_bt.perception.occlusion.without_occluder_rims`): 3 px for a wire 7 px wide.
+RIM_REACH = 0.6
 
 
 @dataclass(frozen=True)
@@ -329,7 +332,8 @@ class NeedleLocalizer:
                     f"too few needle-coloured pixels in the {('left', 'right')[eye]} image "
                     f"({int(view.mask.sum())} < {MIN_NEEDLE_PIXELS})"
                 )
-            view = without_occluder_rims(img, with_occluder(img, view, self.rule), self.rule)
+            view = with_occluder(img, view, self.rule)
+            view = without_occluder_rims(img, view, self.rule, round(RIM_REACH * half_width))
             if self.use_free_space:
                 dt, org = free_space_dt(img, view)
                 view = replace(view, free_dt=dt, free_origin=org)

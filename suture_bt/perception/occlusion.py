@@ -96,28 +96,33 @@ def with_occluder(rgb: np.ndarray, view: MaskView, rule: ColourRule) -> MaskView
     return replace(view, occluder=near & ~view.mask)
 
 
-#: A mask piece with at least this share of its pixels within RIM_REACH_PX of an occluder hugs
+#: A mask piece with at least this share of its pixels within ``reach_px`` of an occluder hugs
 #: its outline: a lit rim of the jaw or shaft that the colour test took for wire.
 RIM_SHARE = 0.6
-RIM_REACH_PX = 3
 
 
-def without_occluder_rims(rgb: np.ndarray, view: MaskView, rule: ColourRule) -> MaskView:
-    """The view (occluder marked, see :func:`with_occluder`) without mask pieces that hug an
-    occluder's outline, and with the occluder marked again.
+def without_occluder_rims(
+    rgb: np.ndarray, view: MaskView, rule: ColourRule, reach_px: int
+) -> MaskView:
+    """The view without mask pieces that hug the outline of a thick occluder (within
+    ``reach_px``, about half the wire's width, of grey non-needle pixels that are more than
+    ``reach_px`` from their own edge: a jaw or shaft, not the needle's own fringe that the mask
+    left out), with the occluder marked again (:func:`with_occluder`).
 
     A needle piece cut off by a jaw touches it only at the cut; a sliver of the jaw's lit rim
     runs along it. Left in, such a sliver a few pixels off the wire pulls the fit's wide-basin
     search stages off the needle (1080p benchmark: one needle fitted 15 mm / 145 deg off).
     The largest piece is always kept.
     """
-    if view.occluder is None or not view.occluder.any():
-        return view
     n, lab = cv2.connectedComponents(view.mask.astype(np.uint8), connectivity=8)
     if n <= 2:
         return view
-    k = 2 * RIM_REACH_PX + 1
-    near = cv2.dilate(view.occluder.astype(np.uint8), np.ones((k, k), np.uint8)).astype(bool)
+    x0, y0 = view.origin
+    h, w = view.mask.shape
+    grey = needle_coloured(rgb[y0 : y0 + h, x0 : x0 + w], rule) & ~view.mask
+    r = max(int(reach_px), 1)
+    thick = cv2.erode(grey.astype(np.uint8), np.ones((2 * r + 1, 2 * r + 1), np.uint8))
+    near = cv2.dilate(thick, np.ones((4 * r + 1, 4 * r + 1), np.uint8)).astype(bool)
     counts = np.bincount(lab.ravel(), minlength=n)
     share = np.bincount(lab[near].ravel(), minlength=n) / np.maximum(counts, 1)
     share[0] = 0.0
