@@ -156,3 +156,16 @@ def test_without_the_band_the_ends_follow_the_previous_estimate_or_are_refused()
         out, _, decided_by = loc._orient(T, images, views, 3.0, previous)
         assert decided_by == "previous"
         np.testing.assert_allclose(out, previous, atol=1e-9)
+
+
+def test_an_end_counts_as_seen_only_on_or_next_to_the_mask():
+    from suture_bt.perception.needle_localizer import _on_mask
+
+    mask = np.zeros((20, 30), bool)
+    mask[10, 5:15] = True  # a 1-px line at full-image row 110, columns 205-214
+    view = MaskView(mask, (200, 100))
+    assert _on_mask(view, np.array([210.0, 110.0]), 2.0)
+    assert _on_mask(view, np.array([216.0, 110.0]), 2.0)  # 2 px past the last pixel
+    assert not _on_mask(view, np.array([217.5, 110.0]), 2.0)
+    assert not _on_mask(view, np.array([210.0, 107.0]), 2.0)
+    assert not _on_mask(view, np.array([50.0, 50.0]), 2.0)  # outside the crop

@@ -93,6 +93,9 @@ MIN_HALF_WIDTH_PX = 1.5
 #: Reach (in gate half-widths) within which a mask piece hugging an occluder counts as its rim
 #: (:func:`~suture_bt.perception.occlusion.without_occluder_rims`): 3 px for a wire 7 px wide.
 RIM_REACH = 0.6
+#: A fitted end whose pixel is farther than this from the needle mask is not seen: the fit put
+#: it behind something, and the grey wire leading up to it says nothing about which end it is.
+END_ON_MASK_PX = 2.0
 
 
 @dataclass(frozen=True)
@@ -429,7 +432,9 @@ class NeedleLocalizer:
         radius = _occlusion_radius(half_width)
 
         def end_hidden(eye: int, uv: np.ndarray) -> bool:
-            return end_is_occluded(images[eye], views[eye], uv, radius, self.rule)
+            return not _on_mask(views[eye], uv, END_ON_MASK_PX) or end_is_occluded(
+                images[eye], views[eye], uv, radius, self.rule
+            )
 
         evidence = base_evidence(
             images,
@@ -451,3 +456,17 @@ class NeedleLocalizer:
             f"(colour evidence {evidence:+.2f}, needs ±{MIN_EVIDENCE:.2f}) and there is no "
             "previous estimate to follow"
         )
+
+
+def _on_mask(view: MaskView, uv: np.ndarray, tol_px: float) -> bool:
+    """Whether a needle-mask pixel lies within ``tol_px`` of the full-image pixel ``uv``."""
+    x0, y0 = view.origin
+    u, v = float(uv[0]) - x0, float(uv[1]) - y0
+    r = int(np.ceil(tol_px))
+    h, w = view.mask.shape
+    a, b = max(int(np.floor(u)) - r, 0), min(int(np.floor(u)) + r + 2, w)
+    c, d = max(int(np.floor(v)) - r, 0), min(int(np.floor(v)) + r + 2, h)
+    if a >= b or c >= d:
+        return False
+    yy, xx = np.nonzero(view.mask[c:d, a:b])
+    return bool(np.any((xx + a - u) ** 2 + (yy + c - v) ** 2 <= tol_px**2))
