@@ -425,7 +425,8 @@ class NeedleLocalizer:
         neither, NeedleNotFound: a swapped needle sends the grasp and the insertion to the
         wrong end.
 
-        A fitted end that touches an occluder may hide the band, so its grey does not vote.
+        A fitted end that touches an occluder may hide the band, and one off the mask is not
+        seen at all: the grey there does not vote.
         (The network's base keypoint used to decide when the band did not: over the 600 scenes
         of the 1080p benchmark sets it was right for 4 of the 12 needles it decided.)
         """
