@@ -47,6 +47,10 @@ def test_bad_image_is_a_value_error():
     loc = NeedleLocalizer(stereo(640, 360), net=_blind_net())
     with pytest.raises(ValueError, match="left image"):
         loc.localize(np.zeros((360, 640), np.uint8), np.zeros((360, 640, 3), np.uint8))
+    img = np.zeros((360, 640, 3), np.uint8)
+    for bad in (np.eye(3), np.full((4, 4), np.nan)):
+        with pytest.raises(ValueError, match="previous must be a finite 4×4"):
+            loc.localize(img, img, previous=bad)
 
 
 def test_shipped_network_localizes_a_rendered_needle(monkeypatch):

@@ -241,6 +241,12 @@ class NeedleLocalizer:
         Raises :class:`NeedleNotFound` (with a reason) when the needle is not visible enough,
         including when base and tip cannot be told apart and there is no ``previous``.
         """
+        if previous is not None:
+            previous = np.asarray(previous, dtype=float)
+            if previous.shape != (4, 4) or not np.all(np.isfinite(previous)):
+                raise ValueError(
+                    f"previous must be a finite 4×4 T_cam_needle, got shape {previous.shape}"
+                )
         t0 = time.perf_counter()
         prob, kp, raw_score, scale = self.network(left, right)
         t1 = time.perf_counter()
