@@ -341,8 +341,8 @@ class NeedleLocalizer:
                     f"too few needle-coloured pixels in the {('left', 'right')[eye]} image "
                     f"({int(view.mask.sum())} < {MIN_NEEDLE_PIXELS})"
                 )
-            view = with_occluder(img, view, self.rule)
             view = without_occluder_rims(img, view, self.rule, round(RIM_REACH * half_width))
+            view = with_occluder(img, view, self.rule)
             if self.use_free_space:
                 dt, org = free_space_dt(img, view)
                 view = replace(view, free_dt=dt, free_origin=org)

@@ -107,7 +107,7 @@ def without_occluder_rims(
     """The view without mask pieces that hug the outline of a thick occluder (within
     ``reach_px``, about half the wire's width, of grey non-needle pixels that are more than
     ``reach_px`` from their own edge: a jaw or shaft, not the needle's own fringe that the mask
-    left out), with the occluder marked again (:func:`with_occluder`).
+    left out). Run it before :func:`with_occluder`, which then marks the dropped rims too.
 
     A needle piece cut off by a jaw touches it only at the cut; a sliver of the jaw's lit rim
     runs along it. Left in, such a sliver a few pixels off the wire pulls the fit's wide-basin
@@ -130,5 +130,4 @@ def without_occluder_rims(
     rims = np.nonzero(share >= RIM_SHARE)[0]
     if not len(rims):
         return view
-    mask = view.mask & ~np.isin(lab, rims)
-    return with_occluder(rgb, replace(view, mask=mask, occluder=None), rule)
+    return replace(view, mask=view.mask & ~np.isin(lab, rims))
