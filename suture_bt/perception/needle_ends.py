@@ -19,7 +19,7 @@ import numpy as np
 from suture_bt.geometry import NeedleModel
 from suture_bt.interfaces import CameraModel
 from suture_bt.perception.colour_refine import ColourRule, needle_coloured
-from suture_bt.perception.needle_projection import end_pixels
+from suture_bt.perception.needle_projection import end_pixels, project_cam, transform_points
 from suture_bt.perception.pose_fit import MaskView
 from suture_bt.transforms import invert
 
@@ -203,13 +203,12 @@ def _band_position_vote(
     p = band_pixels(rgb, view)
     if p is None:
         return None
-    ends = np.stack([model.base, model.tip]) @ T_cam_needle[:3, :3].T + T_cam_needle[:3, 3]
+    ends = transform_points(T_cam_needle, np.stack([model.base, model.tip]))
     if np.any(ends[:, 2] <= 0):
         return None
-    u = cam.fx * ends[:, 0] / ends[:, 2] + cam.cx
-    v = cam.fy * ends[:, 1] / ends[:, 2] + cam.cy
-    d_base = float(np.median(np.hypot(p[:, 0] - u[0], p[:, 1] - v[0])))
-    d_tip = float(np.median(np.hypot(p[:, 0] - u[1], p[:, 1] - v[1])))
+    uv = project_cam(cam, ends)
+    d_base = float(np.median(np.linalg.norm(p - uv[0], axis=1)))
+    d_tip = float(np.median(np.linalg.norm(p - uv[1], axis=1)))
     return float(np.clip((d_tip - d_base) / max(d_tip + d_base, 1.0), -1.0, 1.0))
 
 
