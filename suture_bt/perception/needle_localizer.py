@@ -320,8 +320,9 @@ class NeedleLocalizer:
         if depth is not None and mask_depth is not None:
             if abs(depth / mask_depth - 1.0) > DEPTH_AGREEMENT:
                 depth = None
-        z_min = 0.85 * min(depths) if depths else MIN_DEPTH
-        half_width = 1.35 * self.model.wire_radius * self.stereo.left.fx / max(z_min, MIN_DEPTH)
+        # The nearest the needle can be: the widest it can look.
+        z_near = max(0.85 * min(depths), MIN_DEPTH) if depths else MIN_DEPTH
+        half_width = 1.35 * self.model.wire_radius * self.stereo.left.fx / z_near
         half_width = max(half_width, MIN_HALF_WIDTH_PX)
         views = []
         cams = (self.stereo.left, self.stereo.right)
@@ -330,8 +331,8 @@ class NeedleLocalizer:
             view = with_band_pieces(
                 img,
                 view,
-                chord * cams[eye].fx / max(z_min, MIN_DEPTH),
-                max(z_min, MIN_DEPTH),
+                chord * cams[eye].fx / z_near,
+                z_near,
                 cams[eye],
                 self.model.wire_radius,
                 self.rule,
