@@ -46,6 +46,7 @@ MARK_THICKNESS = 0.0002
 #: ray of the endoscope ends on it, so images need no background fill).
 FLOOR_HALF_SIZE = 0.5
 FLOOR_DEPTH = 0.03
+FLOOR_HALF_THICKNESS = 0.001
 FLOOR_RGBA = (0.09, 0.05, 0.05, 1.0)
 TISSUE_RGBA = (0.86, 0.56, 0.53, 1.0)
 RIDGE_RGBA = (0.83, 0.50, 0.48, 1.0)
@@ -285,7 +286,7 @@ class PhantomBody:
     def _create_floor(self) -> int:
         """A separate static body: large dark floor FLOOR_DEPTH below the tissue top."""
         c = self.client
-        half = [FLOOR_HALF_SIZE, FLOOR_HALF_SIZE, 0.001]
+        half = [FLOOR_HALF_SIZE, FLOOR_HALF_SIZE, FLOOR_HALF_THICKNESS]
         T = self.phantom.T_world_phantom @ make_transform(
             position=(0.0, 0.0, TISSUE_TOP_Z - FLOOR_DEPTH)
         )
@@ -322,6 +323,13 @@ class PhantomBody:
                 below_flanks &= (q - port.T[:3, 3]) @ port.T[:3, 2] <= 0.0
             inside |= below_flanks & (seg.y0 <= y) & (y <= seg.y1) & (z >= TISSUE_TOP_Z)
         return inside
+
+    def below_floor(self, points_world: np.ndarray) -> np.ndarray:
+        """Which world points lie under the top face of the cavity floor (inside it or past it),
+        boolean per point: nothing solid can be there, and the floor hides it from the camera."""
+        q = np.atleast_2d(points_world) @ invert(self.phantom.T_world_phantom)[:3, :3].T
+        q = q + invert(self.phantom.T_world_phantom)[:3, 3]
+        return q[:, 2] < TISSUE_TOP_Z - FLOOR_DEPTH + FLOOR_HALF_THICKNESS
 
     # --- needle bookkeeping -----------------------------------------------------------------
     def _centerline_world(self, T_world_needle: np.ndarray) -> np.ndarray:

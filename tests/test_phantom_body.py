@@ -8,7 +8,7 @@ from suture_bt.geometry.needle import NeedleModel
 from suture_bt.geometry.phantom import TISSUE_TOP_Z, PhantomModel
 from suture_bt.sim.camera import StereoEndoscope
 from suture_bt.sim.needle_body import NeedleBody
-from suture_bt.sim.phantom_body import PhantomBody
+from suture_bt.sim.phantom_body import FLOOR_DEPTH, FLOOR_HALF_THICKNESS, PhantomBody
 from suture_bt.transforms import make_transform, pose_to_transform
 
 MODEL = NeedleModel()
@@ -107,6 +107,10 @@ def test_geometry_and_segmentation(client):
         assert body.inside_tissue(np.stack([out, into])).tolist() == [False, True]
     assert body.inside_tissue(np.array([[0.0, 0.0, TISSUE_TOP_Z - 0.001]]))[0]
     assert not body.inside_tissue(np.array([[-0.02, 0.0, TISSUE_TOP_Z + 0.001]]))[0]
+    # The floor is solid: just under its top face counts, just above it does not.
+    floor_top = TISSUE_TOP_Z - FLOOR_DEPTH + FLOOR_HALF_THICKNESS
+    under, over = [0.05, 0.0, floor_top - 1e-4], [0.05, 0.0, floor_top + 1e-4]
+    assert body.below_floor(np.array([under, over])).tolist() == [True, False]
     cam = StereoEndoscope(client, 640, 480)
     # A needle above the tissue and a box standing in for an arm, all in view.
     L = cam.model.left

@@ -137,12 +137,15 @@ class SceneSampler:
         q = {a: self._arm_q(a, rng, rng.random() < 0.7) for a in ("psm1", "psm2")}
         jaw = {a: float(rng.uniform(0.0, 1.0)) for a in ("psm1", "psm2")}
         T = None
-        # A free needle's depth is drawn once (uniform over ``zr``): re-drawing it on every
-        # rejected attempt would skew the depths towards the near, easily visible ones.
+        # A free needle's depth is drawn once per 100 attempts (uniform over ``zr``): re-drawing
+        # it on every rejected attempt would skew the depths towards the near, easily visible
+        # ones; keeping it for good would fail where nothing at that depth is above the floor.
         z_free = rng.uniform(*zr)
         for attempt in range(600):
             if attempt == 300:
                 scenario = "free"
+            if attempt % 100 == 99:
+                z_free = rng.uniform(*zr)
             if scenario == "resting":
                 x = rng.choice([-1, 1]) * rng.uniform(0.012, 0.04)
                 y = rng.uniform(-0.045, 0.065)
@@ -183,10 +186,11 @@ class SceneSampler:
                 T = cam.T_world_cam @ make_transform(_random_rotation(rng), pc)
             if self._needle_ok(T, zr, allow_buried=scenario == "in_port"):
                 break
-        else:
-            scenario = "free"
-            cam = self.stereo.left
-            T = cam.T_world_cam @ make_transform(np.eye(3), (0.0, 0.0, 0.12))
+        else:  # never seen in practice: a needle resting beside the ridge
+            scenario = "resting"
+            T = self.T_world_phantom @ make_transform(
+                position=(0.02, 0.01, TISSUE_TOP_Z + self.model.wire_radius)
+            )
         return SceneSample(
             scenario,
             T,
@@ -226,11 +230,13 @@ class SimScene:
         )
 
     def _buried(self, pts_world: np.ndarray) -> np.ndarray:
-        """Points inside the tissue or under the block's top face (within its footprint).
+        """Points inside the tissue, under the block's top face (within its footprint) or
+        under the cavity floor.
 
         Beyond the block's edges the needle may hang lower than the tissue top (far from the
         cameras, against the dark background); whatever the block hides there is hidden in the
-        rendered image too.
+        rendered image too. The floor is solid: a needle through it is no real scene (its cut
+        at the floor looks like an end, which no image of a real needle shows).
         """
         ph = self.world.task.phantom.T_world_phantom
         q = (pts_world - ph[:3, 3]) @ ph[:3, :3]
@@ -242,7 +248,8 @@ class SimScene:
             & (q[:, 1] <= BLOCK_Y[1] + 0.002)
         )
         under = footprint & (q[:, 2] < TISSUE_TOP_Z + 0.0003)
-        return under | self.world.phantom.inside_tissue(pts_world)
+        phantom = self.world.phantom
+        return under | phantom.inside_tissue(pts_world) | phantom.below_floor(pts_world)
 
     def apply(self, s: SceneSample) -> None:
         for a in ("psm1", "psm2"):
