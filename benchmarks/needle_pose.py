@@ -112,6 +112,7 @@ def _reason_kind(reason: str) -> str:
         "every start failed",
         "too few needle edge points",
         "which end is the base cannot be told",
+        "the seen part leaves the pose loose",
     ):
         if kind in reason:
             return kind
@@ -246,6 +247,8 @@ def run(
                         "task1_mm": t1,
                         "rms_px": est.rms_px,
                         "end_decided_by": est.end_decided_by,
+                        "angle_std_deg": est.angle_std_deg,
+                        "position_std_mm": est.position_std_mm,
                         "ms": est.timings_ms,
                     }
                 except NeedleNotFound as exc:

@@ -75,6 +75,8 @@ def test_shipped_network_localizes_a_rendered_needle(monkeypatch):
         est = NeedleLocalizer(sim.stereo).localize(left, right)
         with pytest.raises(NeedleNotFound, match="RMS"):  # a fit worse than allowed is refused
             NeedleLocalizer(sim.stereo, max_rms_px=0.0).localize(left, right)
+        with pytest.raises(NeedleNotFound, match="leaves the pose loose"):  # and a loose one
+            NeedleLocalizer(sim.stereo, max_angle_std_deg=0.0).localize(left, right)
         with monkeypatch.context() as m:  # so is one that explains too little of the mask
             m.setattr("suture_bt.perception.needle_localizer.MIN_INLIER_FRACTION", 1.01)
             with pytest.raises(NeedleNotFound, match="holds something else"):
@@ -86,6 +88,8 @@ def test_shipped_network_localizes_a_rendered_needle(monkeypatch):
     assert pos < 2.0 and ang < 5.0  # base and tip told apart (the swage band's colour)
     assert est.end_decided_by == "colour"
     assert est.timings_ms["total"] > 0
+    # A needle in full view is pinned tightly: its predicted spread is well inside the limit.
+    assert 0 < est.angle_std_deg < 1.0 and 0 < est.position_std_mm < 1.0
 
 
 def test_keypoint_depth_contradicted_by_the_masks_neither_gates_nor_hints():

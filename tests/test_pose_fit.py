@@ -164,6 +164,26 @@ def test_fit_tolerates_occlusion_of_a_third_of_the_needle():
     assert pos < 1.0 and ang < 3.0
 
 
+def test_pose_uncertainty_grows_as_the_seen_outline_shrinks():
+    st, T, left, right, ends = _scene_1080p(7, 2.0)
+    full = PoseFitter(st, MODEL).fit(left, right, tuple(ends))
+    assert full.angle_std_deg < 0.5 and full.position_std_mm < 0.5
+    spreads = []
+    for share in (0.35, 0.6):
+        hidden = [_tip_disc_hidden(v, ends, share) for v in (left, right)]
+        res = PoseFitter(st, MODEL).fit(*hidden, tuple(ends))
+        spreads.append(res.angle_std_deg)
+    assert full.angle_std_deg < spreads[0] < spreads[1]
+    assert spreads[1] > 3 * full.angle_std_deg
+
+
+def test_pose_uncertainty_is_infinite_without_enough_edge_points():
+    st, T, left, right, _ = _scene_1080p(3, 0.0)
+    x = pose_to_params(T[None], st.left, MODEL)[0]
+    rays = edge_rays(st, edge_points(left)[:3], edge_points(right)[:3])
+    assert pose_fit.pose_uncertainty(x, rays, st, MODEL) == (float("inf"), float("inf"))
+
+
 @pytest.mark.parametrize("n_final", [2, 3])
 def test_final_candidates_are_clearly_different_solutions(n_final):
     """With the tip hidden the outline allows several poses: the finals are the best start

@@ -98,6 +98,12 @@ RIM_REACH = 0.6
 END_ON_MASK_PX = 2.0
 
 
+#: A final fit whose predicted angle spread (deg; see
+#: :func:`~suture_bt.perception.pose_fit.pose_uncertainty`) exceeds this is refused: the seen
+#: piece of the needle leaves its plane, or its course behind an occluder, free.
+MAX_ANGLE_STD_DEG = 2.0
+
+
 @dataclass(frozen=True)
 class NeedleEstimate:
     """The localiser's answer: pose (left camera and world), fit evidence and timings (ms)."""
@@ -116,6 +122,16 @@ class NeedleEstimate:
     timings_ms: dict
     fit: PoseFitResult = field(repr=False)
     masks: tuple[MaskView, MaskView] = field(repr=False)
+
+    @property
+    def angle_std_deg(self) -> float:
+        """Predicted angle spread of the pose (deg): how loosely the seen outline pins it."""
+        return self.fit.angle_std_deg
+
+    @property
+    def position_std_mm(self) -> float:
+        """Predicted spread of the arc centre (mm)."""
+        return self.fit.position_std_mm
 
     @property
     def confidence(self) -> float:
@@ -163,11 +179,13 @@ class NeedleLocalizer:
         rule: ColourRule | None = None,
         use_free_space: bool = False,
         max_rms_px: float = MAX_RMS_PX,
+        max_angle_std_deg: float = MAX_ANGLE_STD_DEG,
     ) -> None:
         """``use_free_space`` adds the pose fit's free-space term (experimental, off by
         default: on the 1080p occluded benchmark it lowered success from 0.43 to 0.37, since
         tissue hides a needle in a port as an arm does); ``max_rms_px`` is the worst final
-        edge residual accepted (else NeedleNotFound)."""
+        edge residual accepted and ``max_angle_std_deg`` the loosest predicted angle spread
+        (else NeedleNotFound)."""
         self.stereo = stereo
         self.model = model or NeedleModel()
         self.net = for_inference(net if net is not None else load_network(weights))
@@ -176,6 +194,7 @@ class NeedleLocalizer:
         self.rule = rule or ColourRule()
         self.use_free_space = use_free_space
         self.max_rms_px = max_rms_px
+        self.max_angle_std_deg = max_angle_std_deg
         self.fitter = PoseFitter(stereo, self.model, depth_range=(MIN_DEPTH, MAX_DEPTH))
         self.input_width = INPUT_SIZE[0]
         self.coarse_threshold = 0.3
@@ -424,6 +443,12 @@ class NeedleLocalizer:
             raise NeedleNotFound(
                 f"the best pose explains only {100 * fit.inlier_fraction:.0f} % of the mask's "
                 f"edge (< {100 * MIN_INLIER_FRACTION:.0f} %): the mask holds something else"
+            )
+        if fit.angle_std_deg > self.max_angle_std_deg:
+            raise NeedleNotFound(
+                f"the seen part leaves the pose loose: predicted angle spread "
+                f"{fit.angle_std_deg:.1f} deg (> {self.max_angle_std_deg:.1f}; position "
+                f"{fit.position_std_mm:.1f} mm): too little of the needle's curve is seen"
             )
         return fit
 

@@ -458,13 +458,56 @@ def levenberg_marquardt(
     return x, cost
 
 
+def pose_uncertainty(
+    x: np.ndarray,
+    rays: EdgeRays,
+    stereo: StereoCameraModel,
+    model: NeedleModel,
+    sigma: float = 1.0,
+    loss: str = "geman_mcclure",
+) -> tuple[float, float]:
+    """Predicted spread of a fitted pose: (angle std in degrees, arc-centre std in mm).
+
+    The Gauss-Newton covariance s²·(Jᵀ W J)⁻¹ of the robust edge fit at parameters ``x``
+    (W the loss's IRLS weights, s² their weighted residual variance), carried to the needle
+    frame's rotation and origin. It is large where the seen outline leaves the pose free: a
+    short, nearly straight visible piece fixes neither the arc's plane nor how it goes on behind
+    an occluder. Neighbouring edge residuals are treated as independent (they are not), so it
+    ranks views by how firmly they pin the pose; it is not a calibrated standard deviation.
+    """
+    cam = stereo.left
+    x = np.asarray(x, dtype=float)[None]
+    T = params_to_pose(x, cam, model)
+    r, theta = residuals(T, rays, model)
+    T6 = params_to_pose(x[:, None, :] + np.diag(FD_STEPS)[None], cam, model)
+    dT = (T6 - T[:, None]) / FD_STEPS[None, :, None, None]
+    J = edge_jacobian(T, dT, rays, model, theta)[0]
+    r = r[0]
+    ok = np.isfinite(r) & np.isfinite(J).all(0)
+    if ok.sum() <= len(FD_STEPS):
+        return float("inf"), float("inf")
+    J, r = J[:, ok], r[ok]
+    w = _irls_weights(r, sigma, loss)
+    s2 = float((w * r * r).sum() / max(w.sum() - len(FD_STEPS), 1.0))
+    cov = s2 * np.linalg.pinv((J * w) @ J.T)
+    # Small rotations R0ᵀ dR (skew) and origin shifts per parameter.
+    S = np.einsum("ji,kjl->kil", T[0, :3, :3], dT[0, :, :3, :3])
+    J_rot = np.stack([S[:, 2, 1] - S[:, 1, 2], S[:, 0, 2] - S[:, 2, 0], S[:, 1, 0] - S[:, 0, 1]])
+    J_rot = 0.5 * J_rot
+    J_pos = dT[0, :, :3, 3].T
+    var_rot = max(float(np.trace(J_rot @ cov @ J_rot.T)), 0.0)
+    var_pos = max(float(np.trace(J_pos @ cov @ J_pos.T)), 0.0)
+    return float(np.degrees(np.sqrt(var_rot))), float(1e3 * np.sqrt(var_pos))
+
+
 @dataclass(frozen=True)
 class PoseFitResult:
     """A fitted needle pose with its evidence.
 
     ``rms_px`` is the RMS edge residual of inliers; ``inlier_fraction`` the share of edge points
     within 1.5 px of the model outline; ``ambiguity`` the cost of the best clearly different
-    solution minus the chosen one's (small: tilt-mirror not resolved).
+    solution minus the chosen one's (small: tilt-mirror not resolved); ``angle_std_deg`` and
+    ``position_std_mm`` how loosely the seen outline pins the pose (:func:`pose_uncertainty`).
     """
 
     T_cam_needle: np.ndarray
@@ -476,6 +519,8 @@ class PoseFitResult:
     n_edge_points: tuple[int, int]
     ambiguity: float
     candidates: list = field(default_factory=list, repr=False)
+    angle_std_deg: float = float("nan")
+    position_std_mm: float = float("nan")
 
 
 def _rot_angle(Ra: np.ndarray, Rb: np.ndarray) -> float:
@@ -643,6 +688,9 @@ class PoseFitter:
         inl = np.abs(r) < 1.5
         rms = float(np.sqrt(np.mean(r[inl] ** 2))) if inl.any() else float("inf")
         amb = float(np.min(np.delete(cf, b)) - cf[b]) if len(cf) > 1 else float("inf")
+        ang_std, pos_std = pose_uncertainty(
+            xf[b], rays, self.stereo, self.model, 1.0, self.final_loss
+        )
         return PoseFitResult(
             T_cam_needle=T,
             T_world_needle=cam.T_world_cam @ T,
@@ -653,6 +701,8 @@ class PoseFitter:
             n_edge_points=(len(el), len(er)),
             ambiguity=amb,
             candidates=[params_to_pose(xx, cam, self.model) for xx in xf],
+            angle_std_deg=ang_std,
+            position_std_mm=pos_std,
         )
 
     def _diverse(self, x: np.ndarray, cost: np.ndarray, n: int) -> np.ndarray:
