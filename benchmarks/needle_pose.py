@@ -27,7 +27,7 @@ from tqdm import tqdm
 from suture_bt.datagen.needle_data import SimScene
 from suture_bt.geometry.needle import SCORED_POINTS
 from suture_bt.kinematics import forward_kinematics
-from suture_bt.perception.needle_localizer import NeedleLocalizer
+from suture_bt.perception.needle_localizer import MAX_ANGLE_STD_DEG, NeedleLocalizer
 from suture_bt.perception.needle_projection import rasterize_needle
 from suture_bt.perception.pose_fit import NeedleNotFound
 from suture_bt.transforms import invert
@@ -208,10 +208,11 @@ def run(
     weights: str | None,
     threads: int,
     conditions=("unoccluded", "occluded"),
+    max_angle_std_deg: float = MAX_ANGLE_STD_DEG,
 ) -> dict:
     torch.set_num_threads(threads)
     sim = SimScene(width, height)
-    loc = NeedleLocalizer(sim.stereo, weights=weights)
+    loc = NeedleLocalizer(sim.stereo, weights=weights, max_angle_std_deg=max_angle_std_deg)
     # The needle's 180° symmetry about its bisector (base ↔ tip) as a rotation in its frame.
     mid = (sim.model.base_angle + sim.model.tip_angle) / 2
     R_swap = Rotation.from_rotvec(np.pi * np.array([np.cos(mid), np.sin(mid), 0.0])).as_matrix()
@@ -275,12 +276,25 @@ def main(argv=None) -> int:
     ap.add_argument("--weights", help="network weights (default: shipped)")
     ap.add_argument("--threads", type=int, default=1, help="torch threads (default 1)")
     ap.add_argument("--only", choices=["unoccluded", "occluded"], help="run one condition")
+    ap.add_argument(
+        "--max-angle-std-deg",
+        type=float,
+        default=MAX_ANGLE_STD_DEG,
+        help=f"refuse poses whose predicted angle spread exceeds this (default "
+        f"{MAX_ANGLE_STD_DEG}; inf answers every fit)",
+    )
     args = ap.parse_args(argv)
     w, h = (int(v) for v in args.resolution.lower().split("x"))
     t0 = time.time()
     conds = (args.only,) if args.only else ("unoccluded", "occluded")
-    res = run(args.n, w, h, args.seed, args.weights, args.threads, conds)
-    meta = {"resolution": [w, h], "n": args.n, "seed": args.seed, "seconds": time.time() - t0}
+    res = run(args.n, w, h, args.seed, args.weights, args.threads, conds, args.max_angle_std_deg)
+    meta = {
+        "resolution": [w, h],
+        "n": args.n,
+        "seed": args.seed,
+        "max_angle_std_deg": args.max_angle_std_deg,
+        "seconds": time.time() - t0,
+    }
     summary = {k: {kk: vv for kk, vv in v.items() if kk != "per_scene"} for k, v in res.items()}
     print(json.dumps(summary | {"meta": meta}, indent=2))
     if args.json:

@@ -53,4 +53,5 @@ def test_tiny_run_localizes_an_unoccluded_scene_at_1080p():
     row = res["unoccluded"]["per_scene"][0]
     assert row["visible"] >= 0.97 and 80 <= row["depth_mm"] <= 200
     assert row["found"] and row["pos_mm"] < 2.0 and row["ang_deg"] < 5.0
+    assert 0 < row["angle_std_deg"] <= needle_pose.MAX_ANGLE_STD_DEG
     assert res["unoccluded"]["success_rate"] == 1.0
