@@ -490,10 +490,12 @@ def pose_uncertainty(
     w = _irls_weights(r, sigma, loss)
     s2 = float((w * r * r).sum() / max(w.sum() - len(FD_STEPS), 1.0))
     cov = s2 * np.linalg.pinv((J * w) @ J.T)
-    # Small rotations R0ᵀ dR (skew) and origin shifts per parameter.
+    # Per parameter: the small rotation R0ᵀ dR (the axial vector of its skew part) and the
+    # origin's shift.
     S = np.einsum("ji,kjl->kil", T[0, :3, :3], dT[0, :, :3, :3])
-    J_rot = np.stack([S[:, 2, 1] - S[:, 1, 2], S[:, 0, 2] - S[:, 2, 0], S[:, 1, 0] - S[:, 0, 1]])
-    J_rot = 0.5 * J_rot
+    J_rot = 0.5 * np.stack(
+        [S[:, 2, 1] - S[:, 1, 2], S[:, 0, 2] - S[:, 2, 0], S[:, 1, 0] - S[:, 0, 1]]
+    )
     J_pos = dT[0, :, :3, 3].T
     var_rot = max(float(np.trace(J_rot @ cov @ J_rot.T)), 0.0)
     var_pos = max(float(np.trace(J_pos @ cov @ J_pos.T)), 0.0)
