@@ -113,6 +113,7 @@ def _reason_kind(reason: str) -> str:
         "too few needle edge points",
         "which end is the base cannot be told",
         "the seen part leaves the pose loose",
+        "the swage band starts",
     ):
         if kind in reason:
             return kind

@@ -7,7 +7,9 @@ from perception_helpers import stereo
 
 from suture_bt.geometry import NeedleModel
 from suture_bt.perception.needle_ends import (
+    BAND_LENGTH,
     MIN_EVIDENCE,
+    band_offset,
     base_evidence,
     swap_rotation,
     swapped,
@@ -93,6 +95,25 @@ def test_band_position_decides_when_the_fit_is_a_few_pixels_off():
     rough[:3, 3] += (0.0015, -0.0015, 0.002)
     assert base_evidence(images, views, cams, rough, MODEL) > MIN_EVIDENCE
     assert base_evidence(images, views, cams, swapped(rough, MODEL), MODEL) < -MIN_EVIDENCE
+
+
+def _slid(T: np.ndarray, angle: float) -> np.ndarray:
+    """The pose turned by ``angle`` about its own arc axis: the same circle, the arc moved
+    along it (base further round)."""
+    c, s = np.cos(angle), np.sin(angle)
+    return T @ make_transform(np.array([[c, -s, 0], [s, c, 0], [0, 0, 1.0]]))
+
+
+def test_band_offset_is_inside_the_band_for_the_right_pose_and_grows_as_the_fit_slides():
+    T = _pose()
+    images, views, cams = _scene(T)
+    assert 0.0 <= band_offset(images, views, cams, T, MODEL) < BAND_LENGTH
+    # Slid by 8 mm of arc, base first: the seen band now starts 8 mm along the fitted arc.
+    slid = band_offset(images, views, cams, _slid(T, 0.008 / MODEL.radius), MODEL)
+    assert abs(slid - 0.008) < 0.0015
+    # No band seen, no offset.
+    grey = _scene(T, band_colour=GREY)
+    assert band_offset(*grey, T, MODEL) is None
 
 
 def _base_pixel(cam, T_left_needle: np.ndarray, cams) -> np.ndarray:

@@ -166,6 +166,36 @@ def test_without_the_band_the_ends_follow_the_previous_estimate_or_are_refused()
         np.testing.assert_allclose(out, previous, atol=1e-9)
 
 
+def test_a_fit_slid_along_its_circle_away_from_the_band_is_refused():
+    """The swage band marks the first 3 mm of the arc: a pose whose base lies 8 mm before the
+    seen band (its arc moved along the same circle) is refused, the right pose kept."""
+    import dataclasses
+
+    from suture_bt.transforms import make_transform
+
+    st = stereo(960, 540)
+    loc = NeedleLocalizer(st, net=_blind_net())
+    T = random_needle_pose(np.random.default_rng(3), 0.08, 0.12)
+    band = dataclasses.replace(loc.model, tip_angle=loc.model.base_angle - 0.003 / loc.model.radius)
+    images, views = [], []
+    for cam in (st.left, st.right):
+        Tc = invert(cam.T_world_cam) @ st.left.T_world_cam @ T
+        mask = rasterize_needle(cam, Tc, loc.model)
+        img = np.empty((540, 960, 3), np.uint8)
+        img[:] = (215, 140, 132)
+        img[mask] = (158, 161, 168)
+        img[rasterize_needle(cam, Tc, band)] = (150, 60, 170)
+        images.append(img)
+        views.append(MaskView(mask))
+    out, _, decided_by = loc._orient(T, images, views, 3.0, None)
+    assert decided_by == "colour"
+    np.testing.assert_allclose(out, T, atol=1e-9)
+    a = 0.008 / loc.model.radius
+    turn = np.array([[np.cos(a), -np.sin(a), 0.0], [np.sin(a), np.cos(a), 0.0], [0.0, 0.0, 1.0]])
+    with pytest.raises(NeedleNotFound, match="slid along the needle's circle"):
+        loc._orient(T @ make_transform(turn), images, views, 3.0, None)
+
+
 def test_an_end_counts_as_seen_only_on_or_next_to_the_mask():
     from suture_bt.perception.needle_localizer import _on_mask
 

@@ -212,6 +212,46 @@ def _band_position_vote(
     return float(np.clip((d_tip - d_base) / max(d_tip + d_base, 1.0), -1.0, 1.0))
 
 
+#: Share of the band's pixels allowed nearer the base than the offset :func:`band_offset`
+#: reports (a few stray violet pixels must not hide a slid fit).
+BAND_OFFSET_QUANTILE = 10
+
+
+def band_offset(
+    images: tuple[np.ndarray, np.ndarray],
+    views: tuple[MaskView, MaskView],
+    cams: tuple[CameraModel, CameraModel],
+    T_cam_needle: np.ndarray,
+    model: NeedleModel,
+    samples: int = 400,
+) -> float | None:
+    """How far (m, along the arc) the seen swage band starts from the fitted base: the
+    BAND_OFFSET_QUANTILE-th percentile of the violet pixels' nearest arc positions, the larger
+    over the eyes that see the band; None when neither does.
+
+    The band covers the first BAND_LENGTH of the arc, so a right pose puts it at 0-3 mm. A
+    pose slid along its own circle (the visible piece explained by another stretch of it, the
+    real end taken for a cut) puts it further in.
+    """
+    angles = np.linspace(model.base_angle, model.tip_angle, samples)
+    along = np.abs(angles - model.base_angle) * model.radius
+    arc = model.point_at(angles)
+    T_first_world = invert(cams[0].T_world_cam)
+    offsets = []
+    for rgb, view, cam in zip(images, views, cams, strict=True):
+        p = band_pixels(rgb, view)
+        if p is None:
+            continue
+        T = invert(cam.T_world_cam) @ invert(T_first_world) @ T_cam_needle
+        pts = transform_points(T, arc)
+        if np.any(pts[:, 2] <= 0):
+            continue
+        uv = project_cam(cam, pts)
+        nearest = np.argmin(np.linalg.norm(p[:, None] - uv[None], axis=-1), 1)
+        offsets.append(float(np.percentile(along[nearest], BAND_OFFSET_QUANTILE)))
+    return max(offsets) if offsets else None
+
+
 def base_evidence(
     images: tuple[np.ndarray, np.ndarray],
     views: tuple[MaskView, MaskView],

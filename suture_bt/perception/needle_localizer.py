@@ -32,7 +32,9 @@ from suture_bt.perception.colour_refine import (
 from suture_bt.perception.geodesic_ends import geodesic_ends
 from suture_bt.perception.mask_disparity import mask_disparity
 from suture_bt.perception.needle_ends import (
+    BAND_LENGTH,
     MIN_EVIDENCE,
+    band_offset,
     band_pixels,
     base_evidence,
     swapped,
@@ -98,6 +100,9 @@ RIM_REACH = 0.6
 END_ON_MASK_PX = 2.0
 
 
+#: Farthest the seen swage band may start from the fitted base (m, along the arc): half a band
+#: length of slack past the band's own 3 mm.
+MAX_BAND_OFFSET = 1.5 * BAND_LENGTH
 #: A final fit whose predicted angle spread (deg; see
 #: :func:`~suture_bt.perception.pose_fit.pose_uncertainty`) exceeds this is refused: the seen
 #: piece of the needle leaves its plane, or its course behind an occluder, free.
@@ -469,16 +474,25 @@ class NeedleLocalizer:
                 images[eye], views[eye], uv, radius, self.rule
             )
 
+        cams = (self.stereo.left, self.stereo.right)
         evidence = base_evidence(
             images,
             tuple(views),
-            (self.stereo.left, self.stereo.right),
+            cams,
             T_cam,
             self.model,
             end_hidden=end_hidden,
         )
         if abs(evidence) >= MIN_EVIDENCE:
-            return (T_cam if evidence > 0 else swapped(T_cam, self.model)), evidence, "colour"
+            T_cam = T_cam if evidence > 0 else swapped(T_cam, self.model)
+            offset = band_offset(images, tuple(views), cams, T_cam, self.model)
+            if offset is not None and offset > MAX_BAND_OFFSET:
+                raise NeedleNotFound(
+                    f"the swage band starts {1e3 * offset:.1f} mm from the fitted base (it "
+                    f"covers the first {1e3 * BAND_LENGTH:.0f} mm): the fit slid along the "
+                    "needle's circle"
+                )
+            return T_cam, evidence, "colour"
         if previous is not None:
             other = swapped(T_cam, self.model)
             prev = np.asarray(previous, float)[:3, :3]
