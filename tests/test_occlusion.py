@@ -58,6 +58,8 @@ def test_anchored_end_pairs_the_keypoint_with_the_visible_pieces_far_end():
     assert np.allclose(base, kp) and abs(tip[0] - 200.5) < 1.0 and abs(tip[1] - 100) < 3
     base2, tip2 = anchored_ends(kp, False, view)
     assert np.allclose(tip2, kp) and np.allclose(base2, tip)
+    # An empty mask (all of it dropped as an occluder's rim, say) has no far end.
+    assert anchored_ends(kp, True, MaskView(np.zeros_like(view.mask))) is None
 
 
 def test_end_on_the_tissue_silhouette_is_occluded_but_an_end_on_open_tissue_is_not():

@@ -397,7 +397,8 @@ class NeedleLocalizer:
         for e in (0, 1):
             if score[0, e] >= STRONG_KEYPOINT_SCORE > score[0, 1 - e]:
                 h = anchored_ends(kp[0, e], e == 0, views[0])
-                behind += [h] + extended_ends(h, (e == 1, e == 0))
+                if h is not None:
+                    behind += [h] + extended_ends(h, (e == 1, e == 0))
         hidden = bool(behind)  # an end touches an occluder or its keypoint is weak
         along = geodesic_ends(views[0])
         if along is not None and not _same_pair(along, visible_ends):

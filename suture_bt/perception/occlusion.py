@@ -77,8 +77,11 @@ def extended_ends(
 def anchored_ends(anchor_uv: np.ndarray, anchor_is_base: bool, view: MaskView):
     """(base, tip) pixels with one end at a trusted keypoint and the other at the visible
     piece's far end (the mask edge point farthest from the anchor): where the network is
-    unsure of an end, that end is usually hidden and the visible piece stops short of it."""
+    unsure of an end, that end is usually hidden and the visible piece stops short of it.
+    None when the mask is empty (nothing to anchor to)."""
     pts = edge_points(view)
+    if not len(pts):
+        return None
     anchor = np.asarray(anchor_uv, float)
     far = pts[int(np.argmax(np.linalg.norm(pts - anchor, axis=1)))]
     return (anchor, far) if anchor_is_base else (far, anchor)
