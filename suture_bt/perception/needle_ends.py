@@ -212,6 +212,11 @@ def _band_position_vote(
     return float(np.clip((d_tip - d_base) / max(d_tip + d_base, 1.0), -1.0, 1.0))
 
 
+def _in_eye(cam: CameraModel, first: CameraModel, T_first_needle: np.ndarray) -> np.ndarray:
+    """The needle pose in ``cam``'s frame, given it in the ``first`` camera's frame."""
+    return invert(cam.T_world_cam) @ first.T_world_cam @ T_first_needle
+
+
 #: Share of the band's pixels allowed nearer the base than the offset :func:`band_offset`
 #: reports (a few stray violet pixels must not hide a slid fit).
 BAND_OFFSET_QUANTILE = 10
@@ -237,13 +242,12 @@ def band_offset(
     angles = np.linspace(model.base_angle, model.tip_angle, samples)
     along = np.abs(angles - model.base_angle) * model.radius
     arc = model.point_at(angles)
-    T_first_world = invert(cams[0].T_world_cam)
     offsets = []
     for rgb, view, cam in zip(images, views, cams, strict=True):
         p = band_pixels(rgb, view)
         if p is None:
             continue
-        T = invert(cam.T_world_cam) @ invert(T_first_world) @ T_cam_needle
+        T = _in_eye(cam, cams[0], T_cam_needle)
         pts = transform_points(T, arc)
         if np.any(pts[:, 2] <= 0):
             continue
@@ -273,10 +277,9 @@ def base_evidence(
     da = END_ARC / model.radius
     base_arc = model.point_at(np.linspace(model.base_angle - da, model.base_angle, n))
     tip_arc = model.point_at(np.linspace(model.tip_angle, model.tip_angle + da, n))
-    T_first_world = invert(cams[0].T_world_cam)
     votes = []
     for eye, (rgb, view, cam) in enumerate(zip(images, views, cams, strict=True)):
-        T = invert(cam.T_world_cam) @ invert(T_first_world) @ T_cam_needle
+        T = _in_eye(cam, cams[0], T_cam_needle)
         sb = _end_score(rgb, view, cam, T, base_arc)
         st = _end_score(rgb, view, cam, T, tip_arc)
         if end_hidden is not None:

@@ -385,6 +385,13 @@ def robust_cost(
     return np.where(np.isfinite(out), out, np.inf)
 
 
+def _pose_derivatives(x: np.ndarray, T: np.ndarray, cam, model: NeedleModel):
+    """Poses stepped by FD_STEPS in each of the six parameters (K, 6, 4, 4) and the forward
+    differences dT/dx (K, 6, 4, 4) at the poses T (K, 4, 4) of parameters x (K, 6)."""
+    T6 = params_to_pose(x[:, None, :] + np.diag(FD_STEPS)[None], cam, model)
+    return T6, (T6 - T[:, None]) / FD_STEPS[None, :, None, None]
+
+
 def levenberg_marquardt(
     x: np.ndarray,
     rays: EdgeRays,
@@ -424,8 +431,7 @@ def levenberg_marquardt(
         rr = np.where(np.isfinite(r), r, 0.0)
         # Pose derivatives by finite differences (cheap: 6 poses per start), residual
         # derivatives analytically for the edge points, by differences for the extra terms.
-        T6 = params_to_pose(x[:, None, :] + np.diag(FD_STEPS)[None], cam, model)
-        dT = (T6 - T[:, None]) / FD_STEPS[None, :, None, None]
+        T6, dT = _pose_derivatives(x, T, cam, model)
         J = edge_jacobian(T, dT, rays, model, theta)
         if extras:
             re = np.concatenate([e(T6.reshape(-1, 4, 4)) for e in extras], 1)
@@ -479,8 +485,7 @@ def pose_uncertainty(
     x = np.asarray(x, dtype=float)[None]
     T = params_to_pose(x, cam, model)
     r, theta = residuals(T, rays, model)
-    T6 = params_to_pose(x[:, None, :] + np.diag(FD_STEPS)[None], cam, model)
-    dT = (T6 - T[:, None]) / FD_STEPS[None, :, None, None]
+    _, dT = _pose_derivatives(x, T, cam, model)
     J = edge_jacobian(T, dT, rays, model, theta)[0]
     r = r[0]
     ok = np.isfinite(r) & np.isfinite(J).all(0)
