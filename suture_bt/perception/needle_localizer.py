@@ -99,8 +99,6 @@ RIM_REACH = 0.6
 #: A fitted end whose pixel is farther than this from the needle mask is not seen: the fit put
 #: it behind something, and the grey wire leading up to it says nothing about which end it is.
 END_ON_MASK_PX = 2.0
-
-
 #: Farthest the seen swage band may start from the fitted base (m, along the arc): half a band
 #: length of slack past the band's own 3 mm.
 MAX_BAND_OFFSET = 1.5 * BAND_LENGTH
