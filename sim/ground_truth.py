@@ -1,11 +1,11 @@
 """THE ground-truth API of the simulation: for scoring, data generation and tests only.
 
 Honesty boundary (DESIGN.md §3): the true needle pose, true joint positions, true joint
-offsets, segmentation masks and the phantom's crossing records are reachable through this
-module and nowhere else. Skills, behaviours, trees and the core's algorithms must never import
-it (``tests/test_honesty_boundary.py`` enforces this). An "oracle" mode that feeds these values
-to skills, for ablation, must be built in the front door on top of this module and be labelled
-as oracle in every output; it is never the default.
+offsets, segmentation masks and the phantom's crossing and tissue-entry records are reachable
+through this module and nowhere else. Skills, behaviours, trees and the core's algorithms must
+never import it (``tests/test_honesty_boundary.py`` enforces this). An "oracle" mode that feeds
+these values to skills, for ablation, must be built in the front door on top of this module and
+be labelled as oracle in every output; it is never the default.
 """
 
 from __future__ import annotations
@@ -62,6 +62,13 @@ class GroundTruth:
         """SRC Task-1 base/mid/tip points of the true needle (world)."""
         return self._world.task.needle.scored_points(self.needle_pose())
 
+    def needle_tip(self) -> np.ndarray:
+        """True needle tip (world). A held needle is placed exactly on its jaw: between the
+        world's bookkeeping updates the pybullet body lags a moving jaw by up to ~0.1 mm."""
+        needle, holder = self._needle(), self._world.needle_holder
+        T = needle.pose() if holder is None else self.tip_pose_world(holder) @ needle.T_link_needle
+        return T[:3, :3] @ self._world.task.needle.tip + T[:3, 3]
+
     def needle_holder(self) -> str | None:
         """Name of the arm holding the needle, or None."""
         return self._world.needle_holder
@@ -81,6 +88,13 @@ class GroundTruth:
         if self._world.phantom is None:
             raise RuntimeError("this world has no phantom body")
         return list(self._world.phantom.crossings)
+
+    def tissue_entries(self) -> list:
+        """Every place the needle tip went into the tissue so far, anywhere on the phantom
+        (:class:`~suture_bt.sim.phantom_body.TissueEntry`: time, point, nearest port, depth)."""
+        if self._world.phantom is None:
+            raise RuntimeError("this world has no phantom body")
+        return list(self._world.phantom.tissue_entries)
 
     def phantom_state(self):
         """The phantom body's bookkeeping (crossings, overshoot past exits, tissue strain)."""

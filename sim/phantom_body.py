@@ -16,10 +16,17 @@ tip crossing of the port plane within ``CAPTURE_RADIUS`` of the port, with the S
 convention (tip z in the port frame: + to − at an entry, − to + at an exit), the lateral
 distance √(x² + y²) at the crossing (interpolated between steps), how far the tip gets out past
 an exit, and the tissue strain at every engaged port.
+
+Tissue entries (:meth:`PhantomBody.track_tip`, cheap, called by the world whenever the needle
+moved, anywhere on the phantom): every outside → inside transition of the needle tip, with the
+entry point (bisected on the tip's last step), the nearest port and its distance, and how deep
+the tip went before it came out. A tip that is inside at the first sample (a needle that starts
+or is teleported into the tissue) records no entry.
 """
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -56,6 +63,11 @@ CAPTURE_RADIUS = 0.010
 #: A port is engaged while the needle centre-line pierces its plane within this distance.
 ENGAGE_RADIUS = 0.005
 _N_CENTERLINE = 121
+#: Bisection steps for an entry point on the tip's last step (≤ 20 mm / 2^20: ≤ 20 nm).
+ENTRY_BISECTIONS = 20
+#: A tip jump longer than this between two samples is a teleport (``set_pose``), not a motion
+#: (it is 5 m/s at the world's 250 Hz bookkeeping): no entry is recorded across it.
+TELEPORT_JUMP = 0.02
 
 
 @dataclass
@@ -83,6 +95,19 @@ class Strain:
 
     circle: float
     plane: float
+
+
+@dataclass
+class TissueEntry:
+    """One place where the needle tip went into the tissue (ground truth, anywhere)."""
+
+    t: float  # interpolated time of the entry (s)
+    point: np.ndarray  # entry point on the surface (world)
+    nearest_port: str  # the port nearest to the entry point
+    distance: float  # distance from the entry point to that port's position (m)
+    # Greatest straight-line distance of the tip from the entry point while it stayed inside
+    # (m): the depth reached, measured from the entry point (best effort, not along the normal).
+    depth_max: float = 0.0
 
 
 @dataclass
@@ -174,6 +199,14 @@ class PhantomBody:
         self._last_tip: np.ndarray | None = None  # tip in every port frame, P×3
         self._last_t: float | None = None
         self._open_exit: dict[int, Crossing] = {}
+        self.tissue_entries: list[TissueEntry] = []
+        self._T_phantom_world = invert(self.phantom.T_world_phantom)
+        self._fast = self._fast_geometry()
+        self._tip_prev: tuple[float, float, float] | None = None
+        self._tip_prev_t = 0.0
+        self._tip_inside = False
+        self._open_entry: TissueEntry | None = None
+        self._entry_xyz: tuple[float, ...] = (0.0, 0.0, 0.0)
 
     # --- geometry ---------------------------------------------------------------------------
     def _build_segments(self) -> list[_Segment]:
@@ -306,8 +339,8 @@ class PhantomBody:
 
     def inside_tissue(self, points_world: np.ndarray) -> np.ndarray:
         """Which world points lie inside the tissue (block or ridge solid), boolean per point."""
-        q = np.atleast_2d(points_world) @ invert(self.phantom.T_world_phantom)[:3, :3].T
-        q = q + invert(self.phantom.T_world_phantom)[:3, 3]
+        Ti = self._T_phantom_world
+        q = np.atleast_2d(points_world) @ Ti[:3, :3].T + Ti[:3, 3]
         x, y, z = q.T
         inside = (
             (BLOCK_X[0] <= x)
@@ -323,6 +356,40 @@ class PhantomBody:
                 below_flanks &= (q - port.T[:3, 3]) @ port.T[:3, 2] <= 0.0
             inside |= below_flanks & (seg.y0 <= y) & (y <= seg.y1) & (z >= TISSUE_TOP_Z)
         return inside
+
+    def _fast_geometry(self) -> tuple:
+        """Plain floats of the tissue solid for :meth:`_point_inside` (no numpy per call)."""
+        Ti = self._T_phantom_world
+        rows = tuple(tuple(float(v) for v in Ti[k, :4]) for k in range(3))
+        segs = []
+        for seg in self._segments:
+            planes = []
+            for port in (seg.entry, seg.exit):
+                n, p0 = port.T[:3, 2], port.T[:3, 3]
+                planes.append((float(n[0]), float(n[1]), float(n[2]), float(n @ p0)))
+            segs.append((float(seg.y0), float(seg.y1), planes[0], planes[1]))
+        return rows, tuple(segs)
+
+    def _point_inside(self, x: float, y: float, z: float) -> bool:
+        """:meth:`inside_tissue` for one world point in plain Python (~µs, for the tracker)."""
+        (a0, a1, a2, a3), (b0, b1, b2, b3), (c0, c1, c2, c3) = self._fast[0]
+        px = a0 * x + a1 * y + a2 * z + a3
+        py = b0 * x + b1 * y + b2 * z + b3
+        pz = c0 * x + c1 * y + c2 * z + c3
+        if pz < TISSUE_TOP_Z - BLOCK_THICKNESS:
+            return False
+        if pz <= TISSUE_TOP_Z and BLOCK_X[0] <= px <= BLOCK_X[1] and BLOCK_Y[0] <= py <= BLOCK_Y[1]:
+            return True
+        if pz < TISSUE_TOP_Z:
+            return False
+        for y0, y1, (n0, n1, n2, d), (m0, m1, m2, e) in self._fast[1]:
+            if (
+                y0 <= py <= y1
+                and n0 * px + n1 * py + n2 * pz <= d
+                and m0 * px + m1 * py + m2 * pz <= e
+            ):
+                return True
+        return False
 
     def below_floor(self, points_world: np.ndarray) -> np.ndarray:
         """Which world points lie under the top face of the cavity floor (inside it or past it),
@@ -413,6 +480,59 @@ class PhantomBody:
             if m is None or st.circle > m.circle:
                 self.max_strain[name] = st
         return new
+
+    def track_tip(self, tip_world, t: float) -> TissueEntry | None:
+        """Follow the needle tip (world; None: it did not move) and record each tissue entry.
+
+        Cheap (plain Python) so the world can call it whenever the needle moved, far from the
+        ports too. The first sample after construction or :meth:`reset_entry_tracking` only
+        sets the state: a tip already inside then records no entry. Returns a new entry.
+        """
+        if tip_world is None:
+            self._tip_prev_t = float(t)
+            return None
+        x, y, z = (float(v) for v in tip_world)
+        inside = self._point_inside(x, y, z)
+        prev, prev_inside, t0 = self._tip_prev, self._tip_inside, self._tip_prev_t
+        self._tip_prev, self._tip_inside, self._tip_prev_t = (x, y, z), inside, float(t)
+        if not inside:
+            self._open_entry = None
+            return None
+        if prev is None:
+            return None
+        if prev_inside:
+            e = self._open_entry
+            if e is not None:
+                e.depth_max = max(e.depth_max, math.dist((x, y, z), self._entry_xyz))
+            return None
+        a, b = np.array(prev), np.array((x, y, z))
+        if np.linalg.norm(b - a) > TELEPORT_JUMP:
+            return None  # a teleport into the tissue, not a motion: nothing to record
+        lo, hi = 0.0, 1.0  # a(lo) outside, a(hi) inside
+        for _ in range(ENTRY_BISECTIONS):
+            mid = (lo + hi) / 2
+            if self._point_inside(*(a + mid * (b - a))):
+                hi = mid
+            else:
+                lo = mid
+        point = a + hi * (b - a)
+        d_ports = np.linalg.norm(self._port_pos - point, axis=1)
+        k = int(np.argmin(d_ports))
+        entry = TissueEntry(
+            t0 + hi * (float(t) - t0),
+            point,
+            self._ports[k].name,
+            float(d_ports[k]),
+            float(np.linalg.norm(b - point)),
+        )
+        self.tissue_entries.append(entry)
+        self._open_entry, self._entry_xyz = entry, tuple(float(v) for v in point)
+        return entry
+
+    def reset_entry_tracking(self) -> None:
+        """Forget the tip's last place (after a teleport): the next sample records no entry."""
+        self._tip_prev = None
+        self._open_entry = None
 
     def reset_tracking(self) -> None:
         """Forget the last tip position (call after teleporting the needle)."""

@@ -4,7 +4,8 @@ One single-threaded loop (DESIGN.md §4): :meth:`World.step` advances simulated 
 physics ticks of 1/rate (1 kHz by default). In every tick, in this order: the periodic
 callbacks due at that tick (registration order), the arms' trajectories/servos/jaws, grasp and
 release, the pybullet step (free needle dynamics), the kinematic reset of the arm links and of
-a held needle, and the phantom's crossing/strain bookkeeping. Same scene + seed ⇒ same run.
+a held needle, and the phantom's crossing/strain and tissue-entry bookkeeping. Same scene +
+seed ⇒ same run.
 
 What skills may see is :attr:`World.task` (the known phantom and needle models), the arms
 (``psm1``, ``psm2``) and the camera. Ground truth lives in ``suture_bt.sim.ground_truth``.
@@ -37,7 +38,7 @@ from suture_bt.sim.psm_body import LINK_JAWS, LINK_TIP, PSMBody
 from suture_bt.sim.rendering import load_renderer
 from suture_bt.sim.scene import SceneConfig, default_scene
 from suture_bt.sim.simulated_psm import SimulatedPSM
-from suture_bt.transforms import invert, make_transform, pose_to_transform
+from suture_bt.transforms import invert, make_transform, matrix_from_quat_xyzw, pose_to_transform
 
 #: SRC base (RCM) poses of the two arms in the world (DESIGN.md §5).
 PSM_BASE_POSES = {
@@ -217,6 +218,16 @@ class World:
         if self._needle_near_ports()[0]:
             self.phantom.update(self.needle.pose(), 0.0)
             self._phantom_tracking = True
+        # Tissue entries: the tip in the needle body's base (COM) frame, so the tip follows from
+        # the base state read anyway; the first sample records nothing (a tip that starts
+        # inside the tissue is no entry).
+        state = self._last_needle_state
+        T_world_com = make_transform(matrix_from_quat_xyzw(state[3:]), state[:3])
+        T_com_needle = invert(T_world_com) @ self.needle.pose()
+        self._tip_in_com = tuple(
+            float(v) for v in T_com_needle[:3, :3] @ self.task.needle.tip + T_com_needle[:3, 3]
+        )
+        self.phantom.track_tip(self._needle_tip(), 0.0)
 
     def _needle_start_pose(self) -> np.ndarray:
         """World pose of the needle at start, per the scene."""
@@ -382,8 +393,11 @@ class World:
         if self.needle is not None:
             self.needle.update()  # a held needle snaps exactly onto its jaw
             if self.needle.frozen:
+                self.phantom.track_tip(None, t)  # the tissue holds it: the tip stays put
                 return
             near, moved = self._needle_near_ports()
+            # Tissue entries anywhere on the phantom (a few µs, only when the needle moved).
+            self.phantom.track_tip(self._needle_tip() if moved else None, t)
             if near and (moved or not self._phantom_tracking):
                 self.phantom.update(self.needle.pose(), t)
                 self._phantom_tracking = True
@@ -404,6 +418,18 @@ class World:
         self._last_needle_state = state
         d2 = np.sum((self._port_positions - state[:3]) ** 2, axis=1)
         return bool(d2.min() < PORT_WATCH_RADIUS**2), moved
+
+    def _needle_tip(self) -> tuple[float, float, float]:
+        """World needle tip from the base state of the last :meth:`_needle_near_ports` call
+        (quaternion rotation in plain Python: no matrix per bookkeeping update)."""
+        px, py, pz, qx, qy, qz, qw = self._last_needle_state.tolist()
+        vx, vy, vz = self._tip_in_com
+        tx, ty, tz = 2 * (qy * vz - qz * vy), 2 * (qz * vx - qx * vz), 2 * (qx * vy - qy * vx)
+        return (
+            px + vx + qw * tx + qy * tz - qz * ty,
+            py + vy + qw * ty + qz * tx - qx * tz,
+            pz + vz + qw * tz + qx * ty - qy * tx,
+        )
 
     # ------------------------------------------------------------------ helpers
     def segmentation_masks(self, eye: str = "left") -> dict[str, np.ndarray]:
