@@ -1,0 +1,52 @@
+"""Skill: calibrate one arm's hidden joint offset and install Δq̂ in its PI servo.
+
+Wraps the stepwise :class:`~suture_bt.calibration.Calibration` (calibration pose, one image,
+keypoint CNN + MLP). The jaw must be empty (the pose opens it, and the regressor was trained
+on an empty jaw), so the skill fails with that reason when the belief says the arm holds the
+needle. In the oracle ablation the true offset is installed instead, labelled in the report.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from suture_bt.calibration.calibrate import Calibration
+from suture_bt.skills.base import Skill, SkillFailure, Waiting
+from suture_bt.skills.context import TaskContext
+
+
+class CalibrateArm(Skill):
+    """Calibrate ``arm`` (psm1 or psm2)."""
+
+    name = "calibrate arm"
+
+    def __init__(self, context: TaskContext, arm: str):
+        super().__init__(context)
+        self.arm_name = arm
+
+    def program(self) -> Waiting:
+        ctx = self.context
+        handle = ctx.arm(self.arm_name)
+        if ctx.belief is not None and ctx.belief.holder == self.arm_name:
+            raise SkillFailure(f"{self.arm_name} holds the needle: calibration needs an empty jaw")
+        self.say(f"calibrating {self.arm_name}: moving to the calibration pose")
+        cal = Calibration(handle.arm, ctx.camera, handle.servo)
+        cal.start()
+        while cal.phase not in ("done", "failed"):
+            yield
+            cal.step(self.dt)
+            self.say(f"calibrating {self.arm_name}: {cal.phase}")
+        if cal.failure is not None:
+            raise SkillFailure(f"calibration of {self.arm_name} failed: {cal.failure}")
+        dq = np.asarray(cal.result.offset, dtype=float)[:3]
+        if ctx.offset_oracle is not None:
+            dq = np.asarray(ctx.offset_oracle(self.arm_name), dtype=float)[:3]
+            handle.servo.set_offset_estimate(dq)
+            self.report["oracle"] = True
+        handle.calibrated = True
+        handle.offset_estimate = dq.copy()
+        self.report["offset_estimate"] = [float(dq[0]), float(dq[1]), float(dq[2])]
+        self.say(
+            f"{self.arm_name} calibrated: Δq̂ = ({np.rad2deg(dq[0]):+.2f}°, "
+            f"{np.rad2deg(dq[1]):+.2f}°, {1e3 * dq[2]:+.2f} mm)"
+        )

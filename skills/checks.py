@@ -1,0 +1,80 @@
+"""Confirmations from evidence a real robot has: the jaw's measured angle and the images.
+
+Each returns ``(ok, detail)``; skills record them with :meth:`Skill.check`, which fails the
+skill with the detail when ``ok`` is false. None of them can only say yes: each has a test in
+which it must say no.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from suture_bt.geometry import NeedleModel, Port
+from suture_bt.geometry.phantom import TISSUE_TOP_Z
+from suture_bt.transforms import invert, rotation_angle
+
+#: Closed on the 0.72 mm wire the blades stop at about 0.08 rad; closed empty they reach 0.
+JAW_ON_WIRE_MIN = 0.03
+#: SRC throw rule (DESIGN.md §5): lateral distance at the exit and tip out past it.
+MAX_LATERAL = 0.0025
+MIN_TIP_OUT = 0.005
+#: An image estimate agrees with the pose predicted from the arm within these (m, deg).
+AGREE_POSITION = 0.003
+AGREE_ANGLE_DEG = 12.0
+
+
+def jaw_holds_wire(jaw_angle: float) -> tuple[bool, str]:
+    """A closed jaw that stopped short of empty-closed has something between its blades."""
+    ok = jaw_angle >= JAW_ON_WIRE_MIN
+    state = "stopped on the wire" if ok else "closed empty"
+    return ok, f"jaw {state} at {jaw_angle:.3f} rad (wire ≥ {JAW_ON_WIRE_MIN} rad)"
+
+
+def poses_agree(T_seen: np.ndarray, T_predicted: np.ndarray) -> tuple[bool, str]:
+    """The needle seen where the arm's motion says it should be (it moved with the gripper)."""
+    dp = float(np.linalg.norm(T_seen[:3, 3] - T_predicted[:3, 3]))
+    da = float(np.rad2deg(rotation_angle(T_seen[:3, :3], T_predicted[:3, :3])))
+    ok = dp <= AGREE_POSITION and da <= AGREE_ANGLE_DEG
+    return ok, f"seen {dp * 1e3:.1f} mm / {da:.1f}° from where the gripper put it"
+
+
+def tip_out_past_exit(
+    T_world_needle: np.ndarray, needle: NeedleModel, exit_port: Port
+) -> tuple[bool, str, dict]:
+    """Where the seen arc crosses the exit plane (lateral) and how far the tip stands out."""
+    angles = np.linspace(needle.tip_angle, needle.base_angle, 400)
+    pts = needle.point_at(angles) @ T_world_needle[:3, :3].T + T_world_needle[:3, 3]
+    local = (pts - exit_port.position) @ exit_port.T[:3, :3]  # port frame
+    z = local[:, 2]
+    if z[0] <= 0.0:
+        return False, f"tip not out: {-z[0] * 1e3:.1f} mm under {exit_port.name}'s surface", {}
+    below = np.nonzero(z <= 0.0)[0]
+    if len(below) == 0:
+        return False, f"the seen needle does not pass through {exit_port.name}'s surface", {}
+    i = int(below[0])
+    s = z[i - 1] / (z[i - 1] - z[i])
+    c = local[i - 1] + s * (local[i] - local[i - 1])
+    lateral = float(np.hypot(c[0], c[1]))
+    tip_out = float(np.linalg.norm(local[0] - c))
+    ok = lateral <= MAX_LATERAL and tip_out >= MIN_TIP_OUT
+    detail = (
+        f"seen crossing {exit_port.name} {lateral * 1e3:.2f} mm from it "
+        f"(≤ {MAX_LATERAL * 1e3:.1f}), tip {tip_out * 1e3:.1f} mm out (≥ {MIN_TIP_OUT * 1e3:.0f})"
+    )
+    return ok, detail, {"lateral_mm": 1e3 * lateral, "tip_out_mm": 1e3 * tip_out}
+
+
+def clear_of_tissue(
+    T_world_needle: np.ndarray, needle: NeedleModel, T_world_phantom: np.ndarray, ports: list[Port]
+) -> tuple[bool, str]:
+    """Every point of the seen needle is above the tissue: above the flat top, or above one
+    of the ridge flanks (the ridge lies under both flank planes of a pair)."""
+    pts = needle.centerline(60) @ T_world_needle[:3, :3].T + T_world_needle[:3, 3]
+    local = pts @ invert(T_world_phantom)[:3, :3].T + invert(T_world_phantom)[:3, 3]
+    above_top = local[:, 2] > TISSUE_TOP_Z
+    above_flank = np.zeros(len(pts), bool)
+    for p in ports:
+        above_flank |= (pts - p.position) @ p.normal > 0.0
+    ok = bool(np.all(above_top & above_flank))
+    worst = float(np.min(local[:, 2] - TISSUE_TOP_Z))
+    return ok, f"lowest point of the seen needle {worst * 1e3:+.1f} mm from the tissue top"

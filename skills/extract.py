@@ -1,0 +1,104 @@
+"""Skill: the other arm takes the emerged part of the needle and pulls it through.
+
+The puller comes in along its jaws onto the needle just behind the emerged tip, closes (the
+jaw's measured angle must show the wire), the inserting arm opens and backs off, the puller
+continues the planned circle until the needle's base has left the exit, lifts it along the exit
+normal, and a fresh image must show the needle clear of the tissue and where the puller's
+gripper put it.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from suture_bt.planning import NeedleArcError, gripper_poses, plan_needle_arc
+from suture_bt.skills import checks
+from suture_bt.skills.base import Skill, SkillFailure, Waiting
+from suture_bt.skills.context import NeedleNotSeen, TaskContext
+from suture_bt.skills.grasps import backed_off, hand, tip_goal
+from suture_bt.skills.insert import SWEEP
+from suture_bt.skills.localize_needle import LocalizeNeedle
+from suture_bt.skills.motion import FINE, follow_poses, jaw_to, move_to
+
+#: The puller holds the needle this far behind the tip (rad of arc).
+PULL_GRASP_OFFSET = np.deg2rad(15.0)
+#: Approach along the jaws, the inserter's back-off and the lift after extraction (m).
+APPROACH, BACK_OFF, LIFT = 0.008, 0.010, 0.012
+JAW_OPEN = 0.8
+
+
+class Extract(Skill):
+    """``puller`` pulls the needle, inserted by ``inserter``, through pair ``pair``."""
+
+    name = "extract"
+
+    def __init__(self, context: TaskContext, puller: str, inserter: str, pair: int):
+        super().__init__(context)
+        self.puller, self.inserter, self.pair = puller, inserter, pair
+
+    def program(self) -> Waiting:
+        ctx = self.context
+        puller, inserter = ctx.arm(self.puller), ctx.arm(self.inserter)
+        where = f"pair {self.pair}"
+        if ctx.belief is None or ctx.belief.holder != self.inserter:
+            raise SkillFailure(f"{where}: {self.inserter} is not known to hold the needle")
+        entry, exit_ = ctx.phantom.pair(self.pair)
+        try:
+            arc = plan_needle_arc(entry, exit_, ctx.needle)
+        except NeedleArcError as e:
+            raise SkillFailure(f"{where}: {e.reason}") from None
+        T_needle = ctx.predicted_needle()
+        T_hand = hand(ctx.needle, ctx.needle.tip_angle + PULL_GRASP_OFFSET, pulling=True)
+        goal = tip_goal(T_needle, T_hand)
+        self.say(f"{where}: {self.puller} takes the emerged tip")
+        yield from jaw_to(puller, JAW_OPEN)
+        try:
+            yield from move_to(ctx.clock, puller, [backed_off(goal, APPROACH)], "approach the tip")
+        except SkillFailure as e:
+            raise SkillFailure(f"{where}: exit out of {self.puller}'s reach: {e.reason}") from None
+        yield from move_to(ctx.clock, puller, [goal], "reach the tip", FINE, joint_ok=False)
+        yield from jaw_to(puller, 0.0)
+        self.check(f"needle in {self.puller}'s jaw", *checks.jaw_holds_wire(puller.jaw_angle()))
+        self.say(f"{where}: {self.inserter} lets go")
+        yield from jaw_to(inserter, JAW_OPEN)
+        yield from move_to(
+            ctx.clock, inserter, [backed_off(inserter.commanded_tip_world(), BACK_OFF)], "back off"
+        )
+        ctx.belief.holder = self.puller
+        ctx.belief.T_tip_needle = np.linalg.inv(puller.tip_world()) @ T_needle
+        T_gn = ctx.belief.T_tip_needle.copy()
+        self.say(f"{where}: pulling the needle through {exit_.name}")
+        # Continue the circle from where the needle is now (the seen pose's sweep angle).
+        sweep = gripper_poses(arc.extraction(**SWEEP), T_gn)
+        yield from follow_poses(ctx.clock, puller, sweep, f"{where}: pull the needle through")
+        T_up = puller.commanded_tip_world()
+        T_up[:3, 3] += LIFT * exit_.normal
+        yield from move_to(ctx.clock, puller, [T_up], "lift the needle")
+        yield from self._confirm(puller, T_gn)
+
+    def _confirm(self, puller, T_gn) -> Waiting:
+        """A fresh estimate must agree with the puller's gripper and lie clear of the tissue;
+        when the look from the lift pose fails, the puller presents the needle and looks again
+        (a needle still caught in the tissue would not be where the gripper put it)."""
+        ctx = self.context
+        predicted = puller.tip_world() @ T_gn
+        try:
+            obs = ctx.sensor.observe(predicted, prior_checked=True)
+            ok, detail = checks.poses_agree(obs.T_world_needle, predicted)
+            if not ok:
+                raise NeedleNotSeen(f"answer disagrees with the arm: {detail}")
+            ctx.believe(obs, self.puller)
+            ok, detail = checks.clear_of_tissue(
+                obs.T_world_needle, ctx.needle, ctx.phantom.T_world_phantom, ctx.phantom.ports()
+            )
+            self.check(f"pair {self.pair}: needle clear of the tissue", ok, detail)
+        except NeedleNotSeen as e:
+            self.report["refusals"] = [e.reason]
+            yield from self.run(LocalizeNeedle(ctx, self.puller))
+            predicted = puller.tip_world() @ T_gn
+            self.check(
+                f"needle moved with {self.puller} out of the tissue",
+                *checks.poses_agree(ctx.belief.T_world_needle, predicted),
+            )
+            detail = "needle presented and seen where the gripper put it"
+        self.say(f"pair {self.pair}: needle pulled through ({detail})")

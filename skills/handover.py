@@ -1,0 +1,108 @@
+"""Skill: hand the needle from one arm to the other, in the air, at a chosen arc angle.
+
+The giver presents the needle (so the cameras see the whole arc) at a pose from which the taker
+can reach the grasp; the needle is localised there; the taker comes in along its jaws, closes,
+and the jaw's measured angle must show the wire between its blades; the giver opens and backs
+off; the taker presents the needle and a fresh estimate must agree with where its gripper put
+it (the needle moved with the gripper). Output: the belief with the taker as holder and the
+in-hand transform re-estimated from images.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from suture_bt.skills import checks, presentation
+from suture_bt.skills.base import Skill, SkillFailure, Waiting
+from suture_bt.skills.context import NeedleBelief, NeedleObservation, TaskContext
+from suture_bt.skills.grasps import backed_off, hand, held_arc_angle, tip_goal
+from suture_bt.skills.localize_needle import LocalizeNeedle
+from suture_bt.skills.motion import FINE, feasible, jaw_to, move_to
+
+#: The taker comes in along its jaws from this far back (m); the giver backs off as far.
+APPROACH = 0.010
+#: Jaw opening for taking the needle (rad).
+JAW_OPEN = 0.8
+
+
+class Handover(Skill):
+    """``giver`` hands the needle to ``taker``, who takes it at ``arc_angle`` (rad)."""
+
+    name = "hand over"
+
+    def __init__(
+        self, context: TaskContext, giver: str, taker: str, arc_angle: float, pulling: bool = False
+    ):
+        super().__init__(context)
+        self.giver, self.taker = giver, taker
+        self.arc_angle = float(arc_angle)
+        self.pulling = pulling
+
+    def program(self) -> Waiting:
+        ctx = self.context
+        giver, taker = ctx.arm(self.giver), ctx.arm(self.taker)
+        belief = ctx.belief
+        if belief is None or belief.holder != self.giver or belief.T_tip_needle is None:
+            raise SkillFailure(f"hand over: {self.giver} is not known to hold the needle")
+        held = held_arc_angle(ctx.needle, belief.T_tip_needle)
+        if abs(held - self.arc_angle) < np.deg2rad(20.0):
+            raise SkillFailure(
+                f"hand over: {self.taker}'s grasp at {np.rad2deg(self.arc_angle):.0f}° is too "
+                f"close to {self.giver}'s at {np.rad2deg(held):.0f}°"
+            )
+        T_hand = hand(ctx.needle, self.arc_angle, self.pulling)
+        self.report["taker_arc_angle_deg"] = float(np.rad2deg(self.arc_angle))
+
+        def taker_can_reach(T_giver: np.ndarray) -> str:
+            goal = tip_goal(T_giver @ belief.T_tip_needle, T_hand)
+            return feasible(taker, [backed_off(goal, APPROACH), goal])
+
+        poses, why = presentation.choose(ctx, giver, taker_can_reach)
+        if not poses:
+            raise SkillFailure(
+                f"hand over: no pose where {self.giver} shows the needle and {self.taker} "
+                f"reaches it ({why[0] if why else 'no candidate'})"
+            )
+        self.say(f"{self.giver} presents the needle for {self.taker}")
+        yield from jaw_to(taker, JAW_OPEN)
+        for T in poses:
+            yield from move_to(ctx.clock, giver, [T], "present the needle")
+            try:
+                yield from self.run(LocalizeNeedle(ctx, self.giver, present=False))
+                break
+            except SkillFailure as e:
+                self.report.setdefault("refusals", []).append(e.reason)
+        else:
+            raise SkillFailure(f"hand over: needle not localised in {self.giver}'s jaw")
+        T_needle = ctx.belief.T_world_needle.copy()
+        goal = tip_goal(T_needle, T_hand)
+        self.say(f"{self.taker} takes the needle at {np.rad2deg(self.arc_angle):.0f}°")
+        yield from move_to(ctx.clock, taker, [backed_off(goal, APPROACH)], "approach the needle")
+        yield from move_to(ctx.clock, taker, [goal], "reach the grasp", FINE, joint_ok=False)
+        yield from jaw_to(taker, 0.0)
+        self.check(f"needle in {self.taker}'s jaw", *checks.jaw_holds_wire(taker.jaw_angle()))
+        self.say(f"{self.giver} lets go")
+        yield from jaw_to(giver, JAW_OPEN)
+        T_back = backed_off(giver.commanded_tip_world(), APPROACH)
+        yield from move_to(ctx.clock, giver, [T_back], "back off")
+        # The needle has not moved: re-anchor the estimate to the taker's gripper, then look
+        # again after the taker has moved it; it must be where that gripper put it.
+        ctx.believe(_as_observation(ctx.belief, T_needle), self.taker)
+        T_tip_taken = ctx.belief.T_tip_needle.copy()
+        yield from self.run(LocalizeNeedle(ctx, self.taker))
+        predicted = taker.tip_world() @ T_tip_taken
+        self.check(
+            "needle moved with " + self.taker,
+            *checks.poses_agree(ctx.belief.T_world_needle, predicted),
+        )
+        self.say(
+            f"{self.taker} holds the needle at "
+            f"{np.rad2deg(held_arc_angle(ctx.needle, ctx.belief.T_tip_needle)):.0f}°"
+        )
+
+
+def _as_observation(belief: NeedleBelief, T_world_needle: np.ndarray) -> NeedleObservation:
+    """The last estimate as an observation, to re-anchor it to the new holder."""
+    return NeedleObservation(
+        T_world_needle, belief.stamp, belief.angle_std_deg, belief.position_std_mm, belief.source
+    )

@@ -1,0 +1,113 @@
+"""Waiting building blocks for skill programs: Cartesian moves, planned sweeps, the jaw, settling.
+
+Each is a generator to ``yield from`` inside :meth:`Skill.program`: it starts the motion through
+the arm's PI servo (which advances it at its own rate in simulated time), yields once per tick
+until it ends, and raises :class:`SkillFailure` with the planner's reason when a move cannot be
+started or fails on the way.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from suture_bt.kinematics import UnreachablePoseError, inverse_kinematics
+from suture_bt.planning import CartesianMove, JointMove, PoseSequenceMove, TimedPoses, to_base
+from suture_bt.planning.needle_arc import in_base
+from suture_bt.skills.base import SkillFailure, Waiting
+from suture_bt.skills.context import ArmHandle
+
+
+@dataclass(frozen=True)
+class Speed:
+    """Cartesian limits of a move: m/s, m/s², rad/s, rad/s²."""
+
+    v_lin: float
+    a_lin: float
+    v_ang: float
+    a_ang: float
+
+
+#: Moves in free space (presenting, approaching a hover pose).
+TRANSIT = Speed(0.10, 0.5, 1.5, 5.0)
+#: The last centimetre to a grasp or an entry (slower, more accurate).
+FINE = Speed(0.03, 0.2, 0.8, 3.0)
+#: Hold still after a move before looking or closing the jaw (servo settles).
+SETTLE_S = 0.15
+#: The jaw has stopped when its measured angle changes less than this per tick (rad).
+JAW_STILL = 1e-4
+
+
+def wait(clock, seconds: float) -> Waiting:
+    """Yield until ``seconds`` of simulated time have passed."""
+    t_end = clock.now() + seconds
+    while clock.now() < t_end - 1e-9:
+        yield
+
+
+def move_to(
+    clock, arm: ArmHandle, goals_world, what: str, speed: Speed = TRANSIT, joint_ok: bool = True
+) -> Waiting:
+    """Move the tip through world poses (straight lines + SLERP), then settle.
+
+    When the straight path leaves the joint limits on the way (the tool roll wraps), and
+    ``joint_ok``, the arm goes to the last goal in joint space instead (free space only).
+    """
+    base = arm.base_frame()
+    goals = [to_base(np.asarray(g, dtype=float), base) for g in goals_world]
+    move = CartesianMove(
+        arm.servo, goals, v_lin=speed.v_lin, a_lin=speed.a_lin, v_ang=speed.v_ang, a_ang=speed.a_ang
+    )
+    st = move.start(arm.servo.setpoint_jp())
+    if st.failed and joint_ok:
+        try:
+            q = inverse_kinematics(goals[-1], arm.servo.setpoint_jp())
+        except UnreachablePoseError as e:
+            raise SkillFailure(f"{what}: {arm.name} cannot: {e.reason}") from None
+        move = JointMove(arm.servo, [q])
+    yield from _follow(clock, arm, move, what)
+
+
+def feasible(arm: ArmHandle, goals_world, q_start=None) -> str:
+    """'' when every goal has an IK solution in the joint limits (each from the previous,
+    starting at ``q_start`` or the arm's set-point), else the reason."""
+    q = arm.servo.setpoint_jp() if q_start is None else np.asarray(q_start, dtype=float)
+    base = arm.base_frame()
+    for i, g in enumerate(goals_world):
+        try:
+            q = inverse_kinematics(to_base(np.asarray(g, dtype=float), base), q)
+        except UnreachablePoseError as e:
+            return f"goal {i + 1}: {e.reason}"
+    return ""
+
+
+def follow_poses(clock, arm: ArmHandle, poses_world: TimedPoses, what: str) -> Waiting:
+    """Follow planner-timed tip poses (world), e.g. a needle sweep, then settle."""
+    timed = in_base(poses_world, arm.base_frame())
+    move = PoseSequenceMove(arm.servo, timed.times, timed.poses)
+    yield from _follow(clock, arm, move, what)
+
+
+def _follow(clock, arm: ArmHandle, move, what: str) -> Waiting:
+    st = move.start(arm.servo.setpoint_jp())
+    if st.failed:
+        raise SkillFailure(f"{what}: {arm.name} cannot: {st.reason}")
+    arm.servo.follow(move)
+    while not (move.status.done or move.status.failed):
+        yield
+    if move.status.failed:
+        raise SkillFailure(f"{what}: {arm.name} stopped: {move.status.reason}")
+    yield from wait(clock, SETTLE_S)
+
+
+def jaw_to(arm: ArmHandle, angle: float) -> Waiting:
+    """Command the jaw and wait until it has stopped (at the goal or on a wire)."""
+    arm.arm.jaw.move_jp(np.array([angle]))
+    previous = None
+    while True:
+        yield
+        now = arm.jaw_angle()
+        if not arm.arm.jaw.is_busy() and previous is not None and abs(now - previous) < JAW_STILL:
+            return
+        previous = now

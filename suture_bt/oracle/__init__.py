@@ -1,0 +1,43 @@
+"""The oracle ablation: ground truth fed to the skills, for measuring what perception costs.
+
+Never the default; every output of an oracle run says so (``oracle: true``).
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from suture_bt.sim.ground_truth import GroundTruth
+from suture_bt.skills.context import NeedleObservation
+
+
+class OracleNeedleSensor:
+    """Answers every look with the true needle pose (labelled ``oracle``)."""
+
+    def __init__(self, world, clock):
+        self._truth = GroundTruth(world)
+        self._clock = clock
+        self.calls = 0
+
+    def observe(
+        self, previous: np.ndarray | None = None, prior_checked: bool = False
+    ) -> NeedleObservation:
+        self.calls += 1
+        return NeedleObservation(self._truth.needle_pose(), self._clock.now(), 0.0, 0.0, "oracle")
+
+    def support(self, T_world_needle: np.ndarray, angles: np.ndarray) -> tuple[float, float]:
+        """Share of the predicted arc samples within 0.5 mm of the true needle's."""
+        from suture_bt.geometry import NeedleModel
+
+        pts = NeedleModel().point_at(np.asarray(angles, dtype=float))
+        T = self._truth.needle_pose()
+        pred = pts @ np.asarray(T_world_needle)[:3, :3].T + np.asarray(T_world_needle)[:3, 3]
+        true = pts @ T[:3, :3].T + T[:3, 3]
+        share = float(np.mean(np.linalg.norm(pred - true, axis=1) < 5e-4))
+        return share, share
+
+
+def offset_oracle(world):
+    """``arm -> true Δq`` (joints 1-3) for the calibration skill's oracle mode."""
+    truth = GroundTruth(world)
+    return lambda arm: truth.joint_offset(arm)[:3]
