@@ -44,6 +44,7 @@ class Skill:
         self.feedback = ""
         self.report: dict[str, Any] = {}
         self._program: Generator | None = None
+        self._sub: Skill | None = None
         self.dt = 0.0
 
     # ---------------------------------------------------------------- protocol
@@ -72,6 +73,9 @@ class Skill:
 
     def stop(self) -> None:
         """Abandon a running program (pre-emption): motions in progress are held."""
+        if self._sub is not None:
+            self._sub.stop()
+            self._sub = None
         if self._program is not None:
             self._program.close()
             self._program = None
@@ -92,12 +96,14 @@ class Skill:
     def run(self, sub: Skill) -> Waiting:
         """Run another skill inside this one's program (its report is kept in ours)."""
         sub.start()
+        self._sub = sub
         while True:
             status = sub.step(self.dt)
             self.feedback = sub.feedback
             if status is SkillStatus.RUNNING:
                 yield
                 continue
+            self._sub = None
             self.report.setdefault("steps", []).append(sub.report)
             if status is SkillStatus.FAILURE:
                 raise SkillFailure(sub.feedback)

@@ -15,6 +15,8 @@ from suture_bt.transforms import invert, rotation_angle
 
 #: Closed on the 0.72 mm wire the blades stop at about 0.08 rad; closed empty they reach 0.
 JAW_ON_WIRE_MIN = 0.03
+#: A jaw above this angle is not closed at all (the dVRK's closing threshold).
+JAW_CLOSED_MAX = 0.2
 #: SRC throw rule (DESIGN.md §5): lateral distance at the exit and tip out past it.
 MAX_LATERAL = 0.0025
 MIN_TIP_OUT = 0.005
@@ -25,6 +27,8 @@ AGREE_ANGLE_DEG = 12.0
 
 def jaw_holds_wire(jaw_angle: float) -> tuple[bool, str]:
     """A closed jaw that stopped short of empty-closed has something between its blades."""
+    if jaw_angle > JAW_CLOSED_MAX:
+        return False, f"jaw open at {jaw_angle:.3f} rad (closed ≤ {JAW_CLOSED_MAX} rad)"
     ok = jaw_angle >= JAW_ON_WIRE_MIN
     state = "stopped on the wire" if ok else "closed empty"
     return ok, f"jaw {state} at {jaw_angle:.3f} rad (wire ≥ {JAW_ON_WIRE_MIN} rad)"

@@ -109,6 +109,8 @@ class TaskContext:
     belief: NeedleBelief | None = None
     #: Every finished skill's report, in order (the logging and rerun layers read these).
     reports: list[dict[str, Any]] = field(default_factory=list)
+    #: pair -> {status, reason, t_start, t_end}: the throws' windows (``ThrowScope`` writes).
+    throws: dict[int, dict[str, Any]] = field(default_factory=dict)
 
     @property
     def oracle(self) -> bool:

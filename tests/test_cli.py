@@ -60,9 +60,15 @@ def test_scene_prints_summary(tmp_path, capsys):
     assert "psm2   (+2.52, -0.46, +4.00)" in out
 
 
-def test_run_says_what_it_does(tmp_path, capsys):
+def test_run_rejects_an_unknown_tree_in_one_line(tmp_path, capsys):
+    assert main(["run", "no_such_tree", "--out", str(tmp_path / "out")]) == 1
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and "unknown tree 'no_such_tree'" in err[0] and "multi_throw" in err[0]
+
+
+def test_run_rejects_a_malformed_scene_in_one_line(tmp_path, capsys):
     scene = tmp_path / "s.yaml"
-    scene.write_text("camera:\n  width: 64\n  height: 48\n")
-    assert main(["run", "--scene", str(scene), "--out", str(tmp_path / "out")]) == 0
-    out = capsys.readouterr().out
-    assert "does not exist yet" in out and "hidden joint offsets" in out
+    scene.write_text("camera:\n  width: abc\n")
+    assert main(["run", "--scene", str(scene), "--out", str(tmp_path / "out")]) == 1
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and "scene.camera.width" in err[0]

@@ -281,12 +281,6 @@ def test_arms_are_held_on_failure_and_stop_not_on_success():
     assert [sv.stops for sv in servos.values()] == [2, 2]
 
 
-@pytest.mark.xfail(
-    strict=True,
-    reason="Skill.stop() closes only its own generator: a sub-skill running inside run() "
-    "keeps its program open (its finally does not run) and stays RUNNING while the sub-skill "
-    "object is referenced",
-)
 def test_stop_mid_sub_skill_stops_the_sub_skill():
     ctx = make_context()
     sub = Twice(ctx)

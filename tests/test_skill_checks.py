@@ -37,12 +37,6 @@ def test_jaw_closed_empty_says_no(angle):
     assert "empty" in detail
 
 
-@pytest.mark.xfail(
-    strict=True,
-    reason="jaw_holds_wire has no upper bound: a jaw reading 0.8 rad (open, or stopped on "
-    "something far thicker than the 0.72 mm wire, beyond the 0.2 rad closing threshold that "
-    "sim.grasp.check_grasp requires) is reported as 'stopped on the wire'",
-)
 @pytest.mark.parametrize("angle", [0.8, 1.5])
 def test_jaw_open_says_no(angle):
     ok, _ = jaw_holds_wire(angle)

@@ -1,0 +1,117 @@
+"""The action behaviours of the suture trees, one per skill (each a few lines over
+:class:`SkillBehaviour`): what the node is called, which skill it starts, with what arguments.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable
+
+from suture_bt.behaviours.skill_behaviour import SkillBehaviour
+from suture_bt.planning import NeedleArcError, plan_needle_arc
+from suture_bt.skills.calibrate_arm import CalibrateArm
+from suture_bt.skills.context import TaskContext
+from suture_bt.skills.extract import Extract
+from suture_bt.skills.grasps import free_angle, held_arc_angle, insertion_grasp_angle
+from suture_bt.skills.handover import Handover
+from suture_bt.skills.insert import Insert
+from suture_bt.skills.localize_needle import LocalizeNeedle
+
+#: Chooses the taker's arc angle when a handover starts (the belief is known only then).
+AngleRule = Callable[[TaskContext], float]
+
+
+class Calibrate(SkillBehaviour):
+    """Calibrate one arm's joint offset (empty jaw)."""
+
+    def __init__(self, arm: str, name: str | None = None):
+        super().__init__(name or f"Calibrate {arm.upper()}")
+        self.arm = arm
+
+    def make_skill(self):
+        return CalibrateArm(self.context, self.arm)
+
+
+class Localize(SkillBehaviour):
+    """Localise the needle (``holder``: the arm holding it, presented to the cameras)."""
+
+    def __init__(self, holder: str | None, name: str | None = None):
+        super().__init__(
+            name or (f"Localize needle in {holder.upper()}" if holder else "Localize needle")
+        )
+        self.holder = holder
+
+    def make_skill(self):
+        return LocalizeNeedle(self.context, self.holder)
+
+
+class HandOver(SkillBehaviour):
+    """Hand the needle from ``giver`` to ``taker`` at the arc angle ``angle(context)``."""
+
+    def __init__(
+        self,
+        giver: str,
+        taker: str,
+        angle: AngleRule,
+        pulling: bool = False,
+        name: str | None = None,
+    ):
+        super().__init__(name or f"Hand over {giver.upper()} → {taker.upper()}")
+        self.giver, self.taker, self.angle, self.pulling = giver, taker, angle, pulling
+
+    def make_skill(self):
+        return Handover(
+            self.context, self.giver, self.taker, self.angle(self.context), self.pulling
+        )
+
+
+class InsertNeedle(SkillBehaviour):
+    """Drive the needle through a port pair."""
+
+    def __init__(self, arm: str, pair: int, name: str | None = None):
+        super().__init__(name or f"Insert pair {pair}")
+        self.arm, self.pair = arm, pair
+
+    def make_skill(self):
+        return Insert(self.context, self.arm, self.pair)
+
+
+class ExtractNeedle(SkillBehaviour):
+    """The other arm pulls the needle through a port pair."""
+
+    def __init__(self, puller: str, inserter: str, pair: int, name: str | None = None):
+        super().__init__(name or f"Extract pair {pair}")
+        self.puller, self.inserter, self.pair = puller, inserter, pair
+
+    def make_skill(self):
+        return Extract(self.context, self.puller, self.inserter, self.pair)
+
+
+# ------------------------------------------------------------------ angle rules
+def grasp_for_pairs(pairs: tuple[int, ...]) -> AngleRule:
+    """The inserting grasp that leaves room for the tip to come out on all of ``pairs``."""
+
+    def rule(ctx: TaskContext) -> float:
+        angles = []
+        for p in pairs:
+            try:
+                angles.append(
+                    insertion_grasp_angle(plan_needle_arc(*ctx.phantom.pair(p), ctx.needle))
+                )
+            except NeedleArcError:
+                continue  # the insert skill reports this pair's planning failure itself
+        return max(angles) if angles else ctx.needle.base_angle - 0.2
+
+    return rule
+
+
+def away_from_holder_and(later: AngleRule) -> AngleRule:
+    """An angle far from the current holder's grasp and from a grasp needed later."""
+
+    def rule(ctx: TaskContext) -> float:
+        avoid = [later(ctx)]
+        b = ctx.belief
+        if b is not None and b.T_tip_needle is not None:
+            avoid.append(held_arc_angle(ctx.needle, b.T_tip_needle))
+        return free_angle(ctx.needle, avoid)
+
+    return rule

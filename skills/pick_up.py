@@ -1,0 +1,186 @@
+"""Skill: pick up a needle lying free (resting on the tissue) at a chosen arc angle.
+
+The needle is localised where it lies; the jaws come down on it from above, across the needle
+plane with the wire along tip x (the driving hand of :mod:`grasps`, ``GRASP_DEPTH`` behind the
+tip), from a hover pose ``APPROACH`` back along their length; they close, and the jaw's measured
+angle must show the wire between the blades (an empty close backs off before failing); the arm
+lifts the needle along the phantom's up axis; the estimate is re-anchored to the gripper, the
+needle is presented to the cameras and a fresh estimate must agree with where the gripper put
+it (the needle moved with it) and be held near the asked arc angle. Output: the belief with the
+arm as holder and the in-hand transform re-estimated from images.
+
+A resting needle lies roughly flat: its z axis points up (the SRC rest pose: identity rotation)
+or down (turned over). The driving hand puts tip z = −needle z, so on a needle turned over it
+would come from below the tissue: the skill then takes it with the only hand the geometry
+allows, the same grasp turned half a turn about the wire (tip z = +needle z, jaws from above),
+and says so in its feedback and report (``hand``: "driving" or "turned over"). That grasp is
+not the one the insertion planner drives with: a hand-over to the other arm and back gives it.
+A needle on its edge (no jaw direction within ``MAX_TILT`` of straight down) is refused.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from suture_bt.geometry import NeedleModel
+from suture_bt.geometry.phantom import TISSUE_TOP_Z
+from suture_bt.skills import checks
+from suture_bt.skills.base import Skill, SkillFailure, Waiting
+from suture_bt.skills.context import ArmHandle, NeedleObservation, TaskContext
+from suture_bt.skills.grasps import GRASP_DEPTH, backed_off, hand, held_arc_angle, tip_goal
+from suture_bt.skills.localize_needle import LocalizeNeedle
+from suture_bt.skills.motion import FINE, feasible, jaw_to, move_to
+from suture_bt.transforms import invert, make_transform
+
+#: The jaws come down along their length from this far back (m).
+APPROACH = 0.010
+#: The needle is lifted this far along the phantom's up axis once held (m).
+LIFT = 0.015
+#: Jaw opening for the approach (rad).
+JAW_OPEN = 0.8
+#: Largest angle (rad) between the jaws' direction and straight down (−phantom up).
+MAX_TILT = np.deg2rad(60.0)
+#: The blades reach this far beyond the tip control point along tip z (m; the blade length
+#: the world's grasp geometry uses).
+BLADE_BEYOND_TIP = 0.0019
+#: The grasp the images confirm must be this close to the asked arc angle (rad).
+ARC_TOLERANCE = np.deg2rad(10.0)
+
+
+def turned_over_hand(needle: NeedleModel, arc_angle: float) -> np.ndarray:
+    """T_tip_needle of the driving hand turned half a turn about the wire (tip x): tip z =
+    +needle z, the arc centre toward −tip y, the wire ``GRASP_DEPTH`` behind the tip."""
+    a = float(arc_angle)
+    tangent = np.array([np.sin(a), -np.cos(a), 0.0])
+    radial = np.array([np.cos(a), np.sin(a), 0.0])
+    R = np.stack([-tangent, -radial, [0.0, 0.0, 1.0]])  # rows: tip axes in the needle frame
+    return make_transform(R, np.array([0.0, 0.0, -GRASP_DEPTH]) - R @ needle.point_at(a))
+
+
+class PickUp(Skill):
+    """``arm`` (None: whichever can reach, calibrated first) picks up the free needle and
+    holds it at ``arc_angle`` (rad)."""
+
+    name = "pick up"
+
+    def __init__(self, context: TaskContext, arm: str | None, arc_angle: float):
+        super().__init__(context)
+        self.arm_name = arm
+        self.arc_angle = float(arc_angle)
+
+    def program(self) -> Waiting:
+        ctx = self.context
+        belief = ctx.belief
+        if belief is not None and belief.holder is not None:
+            raise SkillFailure(f"pick up: the needle is held by {belief.holder}")
+        asked = np.rad2deg(self.arc_angle)
+        self.report["arc_angle_deg"] = float(asked)
+        self.say("looking for the needle")
+        yield from self.run(LocalizeNeedle(ctx, None))
+        T_needle = ctx.belief.T_world_needle.copy()
+
+        T_hand, which = self._choose_hand(T_needle)
+        arm, goal = self._choose_arm(T_needle, T_hand)
+        hover = backed_off(goal, APPROACH)
+        self.report.update(
+            arm=arm.name,
+            hand=which,
+            T_world_tip_goal=goal.tolist(),
+            blade_end_below_tissue_mm=self._blade_depth_mm(goal),
+        )
+        if not arm.calibrated:
+            self.report["uncalibrated"] = True
+
+        self.say(f"{arm.name} comes over the needle at {asked:.0f}° ({which} hand)")
+        arm.arm.jaw.move_jp(np.array([JAW_OPEN]))  # opens on the way
+        yield from move_to(ctx.clock, arm, [hover], "hover over the needle")
+        yield from jaw_to(arm, JAW_OPEN)
+        self.say(f"{arm.name} comes down on the needle")
+        yield from move_to(ctx.clock, arm, [goal], "reach the grasp", FINE, joint_ok=False)
+        yield from jaw_to(arm, 0.0)
+        held, detail = checks.jaw_holds_wire(arm.jaw_angle())
+        if not held:  # leave the tissue before failing: open and go back up
+            yield from jaw_to(arm, JAW_OPEN)
+            yield from move_to(ctx.clock, arm, [hover], "back off", FINE, joint_ok=False)
+        self.check(f"needle in {arm.name}'s jaw", held, detail)
+
+        # The needle has not moved yet: anchor the estimate to the gripper, lift, present it,
+        # and it must be seen where the gripper put it.
+        ctx.believe(_as_observation(ctx.belief, T_needle), arm.name)
+        T_tip_taken = ctx.belief.T_tip_needle.copy()
+        self.say(f"{arm.name} lifts the needle")
+        up = ctx.phantom.T_world_phantom[:3, 2]
+        T_lift = arm.commanded_tip_world()
+        T_lift[:3, 3] += LIFT * up
+        yield from move_to(ctx.clock, arm, [T_lift], "lift the needle", FINE, joint_ok=False)
+        yield from self.run(LocalizeNeedle(ctx, arm.name))
+        predicted = arm.tip_world() @ T_tip_taken
+        self.check(
+            "needle moved with " + arm.name,
+            *checks.poses_agree(ctx.belief.T_world_needle, predicted),
+        )
+        got = np.rad2deg(held_arc_angle(ctx.needle, ctx.belief.T_tip_needle))
+        self.report["held_arc_angle_deg"] = float(got)
+        self.check(
+            "held at the asked arc angle",
+            abs(got - asked) <= np.rad2deg(ARC_TOLERANCE),
+            f"seen held at {got:.0f}°, asked {asked:.0f}° (± {np.rad2deg(ARC_TOLERANCE):.0f}°)",
+        )
+        note = "" if which == "driving" else " (turned over: not the driving hand)"
+        self.say(f"{arm.name} holds the needle at {got:.0f}°{note}")
+
+    # ---------------------------------------------------------------- helpers
+    def _choose_hand(self, T_needle: np.ndarray) -> tuple[np.ndarray, str]:
+        """The hand whose jaws come from above: driving when the needle's z points up."""
+        ctx = self.context
+        up = ctx.phantom.T_world_phantom[:3, 2]
+        z_up = float(T_needle[:3, 2] @ up)
+        tilt = float(np.arccos(min(1.0, abs(z_up))))
+        self.report["needle_tilt_deg"] = float(np.rad2deg(tilt))
+        if tilt > MAX_TILT:
+            raise SkillFailure(
+                f"pick up: the needle stands on its edge (plane {np.rad2deg(tilt):.0f}° from "
+                f"the tissue, > {np.rad2deg(MAX_TILT):.0f}°): no grasp from above"
+            )
+        if z_up >= 0.0:
+            return hand(ctx.needle, self.arc_angle), "driving"
+        return turned_over_hand(ctx.needle, self.arc_angle), "turned over"
+
+    def _choose_arm(self, T_needle: np.ndarray, T_hand: np.ndarray) -> tuple[ArmHandle, np.ndarray]:
+        """The named arm, or the first that reaches (calibrated arms first, nearest first)."""
+        ctx = self.context
+        goal = tip_goal(T_needle, T_hand)
+        T_lift = goal.copy()
+        T_lift[:3, 3] += LIFT * ctx.phantom.T_world_phantom[:3, 2]
+        path = [backed_off(goal, APPROACH), goal, T_lift]
+        if self.arm_name is not None:
+            arm = ctx.arm(self.arm_name)
+            why = feasible(arm, path)
+            if why:
+                raise SkillFailure(f"needle out of {arm.name}'s reach: {why}")
+            return arm, goal
+        arms = sorted(
+            ctx.arms.values(),
+            key=lambda a: (not a.calibrated, np.linalg.norm(a.base_frame()[:3, 3] - goal[:3, 3])),
+        )
+        reasons = []
+        for arm in arms:
+            why = feasible(arm, path)
+            if not why:
+                return arm, goal
+            reasons.append(f"{arm.name}: {why}")
+        raise SkillFailure(f"needle out of every arm's reach: {'; '.join(reasons)}")
+
+    def _blade_depth_mm(self, goal: np.ndarray) -> float:
+        """How far the blade ends go below the (flat) tissue top at the grasp (mm, + = below)."""
+        T_ph = self.context.phantom.T_world_phantom
+        blade_end = goal[:3, :3] @ np.array([0.0, 0.0, BLADE_BEYOND_TIP]) + goal[:3, 3]
+        height = (invert(T_ph) @ np.r_[blade_end, 1.0])[2] - TISSUE_TOP_Z
+        return float(-1e3 * height)
+
+
+def _as_observation(belief, T_world_needle: np.ndarray) -> NeedleObservation:
+    """The last estimate as an observation, to re-anchor it to the new holder."""
+    return NeedleObservation(
+        T_world_needle, belief.stamp, belief.angle_std_deg, belief.position_std_mm, belief.source
+    )
