@@ -154,6 +154,8 @@ class PickUp(Skill):
         T_lift[:3, 3] += LIFT * ctx.phantom.T_world_phantom[:3, 2]
         path = [backed_off(goal, APPROACH), goal, T_lift]
         if self.arm_name is not None:
+            if self.arm_name not in ctx.arms:
+                raise SkillFailure(f"pick up: no arm named {self.arm_name!r}")
             arm = ctx.arm(self.arm_name)
             why = feasible(arm, path)
             if why:
