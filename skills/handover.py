@@ -69,13 +69,22 @@ class Handover(Skill):
             yield from move_to(ctx.clock, giver, [T], "present the needle")
             try:
                 yield from self.run(LocalizeNeedle(ctx, self.giver, present=False))
-                break
             except SkillFailure as e:
                 self.report.setdefault("refusals", []).append(e.reason)
+                continue
+            # Reachability again, now from the fresh estimate (the prediction used to choose
+            # the pose carries the giver's in-hand error).
+            T_needle = ctx.belief.T_world_needle.copy()
+            goal = tip_goal(T_needle, T_hand)
+            reason = feasible(taker, [backed_off(goal, APPROACH), goal])
+            if not reason:
+                break
+            self.report.setdefault("refusals", []).append(f"{self.taker} cannot reach: {reason}")
         else:
-            raise SkillFailure(f"hand over: needle not localised in {self.giver}'s jaw")
-        T_needle = ctx.belief.T_world_needle.copy()
-        goal = tip_goal(T_needle, T_hand)
+            raise SkillFailure(
+                f"hand over: no presentation of the needle in {self.giver}'s jaw that "
+                f"{self.taker} can take: {'; '.join(self.report.get('refusals', [])[-2:])}"
+            )
         self.say(f"{self.taker} takes the needle at {np.rad2deg(self.arc_angle):.0f}°")
         yield from move_to(ctx.clock, taker, [backed_off(goal, APPROACH)], "approach the needle")
         yield from move_to(ctx.clock, taker, [goal], "reach the grasp", FINE, joint_ok=False)

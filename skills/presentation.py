@@ -102,6 +102,6 @@ def choose(
             why.append(reason)
         else:
             good.append(T)
-        if len(good) >= 3:
+        if len(good) >= 5:
             break
     return good, why

@@ -7,8 +7,8 @@ walk is shown to find it when it is there.
 
 import py_trees
 import pytest
-
 from honesty_helpers import reachable_sim_objects
+
 from suture_bt import trees
 from suture_bt.runtime.context_factory import build_context
 from suture_bt.sim.scene import scene_from_dict

@@ -24,13 +24,20 @@ def _port_frames(phantom) -> dict[str, dict[str, list]]:
 
 def result_document(session, scores, calibration: dict, passed: bool) -> dict[str, Any]:
     """Everything a run reports (scores from the world's records; the tree's own view beside)."""
+    from suture_bt.behaviours.throw_scope import failure_reason
+
     ctx = session.context
+    tree_failure = None
+    if session.root.status.value == "FAILURE":
+        tree_failure = failure_reason(session.root)
     throws = []
     for s in scores:
         d = s.to_dict()
         tree = ctx.throws.get(s.pair, {})
         d["tree_status"] = tree.get("status", "NOT RUN")
         d["tree_reason"] = tree.get("reason")
+        if d["failure"] == "not attempted" and (tree_failure or session.error):
+            d["failure"] = f"not attempted: the run ended at {tree_failure or session.error}"
         if d["failure"] is None and not d["passed"]:
             d["failure"] = tree.get("reason") or "failed"
         if not d["passed"] and tree.get("reason") and d["failure"] != tree.get("reason"):
@@ -48,6 +55,7 @@ def result_document(session, scores, calibration: dict, passed: bool) -> dict[st
         "policy": opts.policy,
         "tree_status": session.root.status.value,
         "error": session.error,
+        "tree_failure": tree_failure,
         "ticks": session.ticks,
         "throws": throws,
         "calibration_error": calibration,
@@ -116,6 +124,7 @@ def throw_table(result: dict[str, Any]) -> str:
         f"throws, {result['sim_time_s']:.1f} s simulated, "
         f"{result['wall_time_s']:.1f} s wall{oracle}"
     )
-    if result.get("error"):
-        lines.append(result["error"])
+    for key in ("tree_failure", "error"):
+        if result.get(key):
+            lines.append(f"{key.replace('_', ' ')}: {result[key]}")
     return "\n".join(lines)
