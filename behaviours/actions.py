@@ -15,6 +15,7 @@ from suture_bt.skills.grasps import free_angle, held_arc_angle, insertion_grasp_
 from suture_bt.skills.handover import Handover
 from suture_bt.skills.insert import Insert
 from suture_bt.skills.localize_needle import LocalizeNeedle
+from suture_bt.skills.pick_up import PickUp
 
 #: Chooses the taker's arc angle when a handover starts (the belief is known only then).
 AngleRule = Callable[[TaskContext], float]
@@ -84,6 +85,17 @@ class ExtractNeedle(SkillBehaviour):
 
     def make_skill(self):
         return Extract(self.context, self.puller, self.inserter, self.pair)
+
+
+class PickUpNeedle(SkillBehaviour):
+    """Localise the needle resting on the tissue and pick it up at ``angle(context)``."""
+
+    def __init__(self, arm: str, angle: AngleRule, name: str | None = None):
+        super().__init__(name or f"Pick up the needle with {arm.upper()}")
+        self.arm, self.angle = arm, angle
+
+    def make_skill(self):
+        return PickUp(self.context, self.arm, self.angle(self.context))
 
 
 # ------------------------------------------------------------------ angle rules

@@ -21,6 +21,7 @@ from suture_bt.behaviours.actions import (
     HandOver,
     InsertNeedle,
     Localize,
+    PickUpNeedle,
     away_from_holder_and,
     grasp_for_pairs,
 )
@@ -75,11 +76,7 @@ def prepare(pairs: tuple[int, ...]) -> py_trees.behaviour.Behaviour:
 
 
 def pick_up_children(grasp) -> list[py_trees.behaviour.Behaviour]:
-    """Localise the resting needle and pick it up with PSM2 (when the pick-up skill exists)."""
-    try:
-        from suture_bt.behaviours.actions import PickUpNeedle
-    except ImportError:  # pragma: no cover - until the pick-up behaviour lands
-        return [Localize(None), py_trees.behaviours.Failure("Pick up (not available)")]
+    """Localise the resting needle and pick it up with PSM2 at the throws' grasp."""
     return [PickUpNeedle(INSERTER, grasp)]
 
 
