@@ -43,7 +43,7 @@ class VisionNeedleSensor:
         except Exception as exc:  # noqa: BLE001 - a lost frame is a refusal with its reason
             raise NeedleNotSeen(f"no frame: {exc}") from exc
         self.last_frame, self.last_estimate = frame, None
-        T_cam_world = np.linalg.inv(self.camera.model.left.T_world_cam)
+        T_cam_world = self.camera.model.left.T_cam_world
         prev_cam = None if previous is None else T_cam_world @ np.asarray(previous, dtype=float)
         strict_rms = self.localizer.max_rms_px
         if prior_checked and prev_cam is not None:

@@ -19,6 +19,7 @@ from suture_bt.kinematics import UnreachablePoseError, inverse_kinematics
 from suture_bt.planning import to_base
 from suture_bt.skills.context import ArmHandle, TaskContext
 from suture_bt.skills.grasps import GRASP_DEPTH
+from suture_bt.skills.motion import feasible
 from suture_bt.transforms import make_transform
 
 #: Distance of the pinch point in front of the left camera (m, along its optical axis).
@@ -93,8 +94,6 @@ def choose(
 ) -> tuple[list[np.ndarray], list[str]]:
     """Candidate poses the arm can move to now (and that ``accept`` passes: '' = ok), in order,
     plus the reasons the others were dropped."""
-    from suture_bt.skills.motion import feasible
-
     good, why = [], []
     for T in candidate_poses(ctx, arm):
         reason = feasible(arm, [T]) or (accept(T) if accept else "")
