@@ -15,6 +15,7 @@ from suture_bt.sim.quiet import import_pybullet_quietly  # noqa: E402
 import_pybullet_quietly()  # before the commands import the simulator
 
 from suture_bt.commands import data as data_command  # noqa: E402
+from suture_bt.commands import eval as eval_command  # noqa: E402
 from suture_bt.commands import run as run_command  # noqa: E402
 from suture_bt.commands import scene as scene_command  # noqa: E402
 from suture_bt.commands import train as train_command  # noqa: E402
@@ -25,6 +26,7 @@ COMMANDS = [
     run_command,
     data_command,
     train_command,
+    eval_command,
 ]
 
 PROG = "suture-bt"
