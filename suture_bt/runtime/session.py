@@ -23,7 +23,10 @@ from suture_bt import trees
 from suture_bt.evaluation.records import records_from_world
 from suture_bt.evaluation.throw_scores import run_passed
 from suture_bt.evaluation.tip_recorder import TipRecorder
+from suture_bt.runtime.breakpoints import Hit, Stop, run_until
+from suture_bt.runtime.camera_tap import CameraTap
 from suture_bt.runtime.context_factory import build_context
+from suture_bt.runtime.observer import TickRecord, TreeObserver
 from suture_bt.runtime.results import result_document, write_result
 from suture_bt.sim.ground_truth import GroundTruth
 from suture_bt.sim.scene import SceneConfig, load_scene, scene_from_dict
@@ -66,9 +69,26 @@ def quiet_renderer():
 
 
 class Session:
-    """A world, its context and a set-up tree, ready to tick."""
+    """A world, its context and a set-up tree, ready to tick.
 
-    def __init__(self, options: RunOptions, scene: SceneConfig | None = None):
+    ``Session(options)`` or, in a notebook, ``Session(tree="localize", scene="s.yaml",
+    seed=3)``; then ``step()``, ``run_until("Insert pair 1")``, ``tree_text()``. Every tick
+    is observed (:attr:`observer`); sinks such as the rerun recording attach to it.
+    """
+
+    def __init__(
+        self,
+        options: RunOptions | None = None,
+        scene: SceneConfig | str | Path | dict | None = None,
+        **option_fields: Any,
+    ):
+        if options is not None and option_fields:
+            raise TypeError("pass either RunOptions or option keywords, not both")
+        options = options or RunOptions(**option_fields)
+        if isinstance(scene, str | Path):  # a scene file: loaded like --scene (seed applies)
+            options, scene = dataclasses.replace(options, scene=str(scene)), None
+        elif isinstance(scene, dict):
+            scene = scene_from_dict(scene)
         self.options = options
         self.scene = scene or run_scene(options)
         py_trees.blackboard.Blackboard.clear()  # one run per process state
@@ -76,6 +96,7 @@ class Session:
         with quiet_renderer():
             self.world = World.from_scene(self.scene)
         self.context = build_context(self.world, oracle=options.oracle)
+        self.context.camera = CameraTap(self.context.camera)  # the recording sees its frames
         self.tree = py_trees.trees.BehaviourTree(self.root)
         self.recorder = TipRecorder(self.world)
         self.error: str | None = None
@@ -83,6 +104,7 @@ class Session:
         self.wall_time = 0.0
         with quiet_renderer():
             self.tree.setup(context=self.context, clock=self.context.clock, tick_dt=options.tick_dt)
+        self.observer = TreeObserver(self.tree, self.context.clock, self)
 
     # ---------------------------------------------------------------- ticking
     @property
@@ -102,6 +124,7 @@ class Session:
                 self.world.step(self.options.tick_dt)
         except Exception as exc:  # noqa: BLE001 - a crash ends the run with its reason
             self.error = f"internal error at t={self.context.clock.now():.2f} s: {exc}"
+            self.observer.error(self.error)
         self.ticks += 1
         self.wall_time += time.perf_counter() - t0
 
@@ -111,6 +134,24 @@ class Session:
             self.tick()
             if on_tick is not None:
                 on_tick(self)
+
+    def step(self, n: int = 1) -> TickRecord | None:
+        """Tick up to ``n`` times (fewer when the run ends); the last tick's record."""
+        for _ in range(int(n)):
+            if self.finished:
+                break
+            self.tick()
+        return self.observer.last
+
+    def run_until(self, stop: Stop, max_ticks: int | None = None) -> Hit | None:
+        """Tick until ``stop`` hits (a breakpoint such as ``"Insert pair 1"`` or
+        ``"Calibrate PSM1=SUCCESS"``, ``"until-fail"``, a predicate on the session, or a
+        list); the Hit, or None when the run ended first."""
+        return run_until(self, stop, max_ticks)
+
+    def tree_text(self) -> str:
+        """py_trees' unicode tree with every node's status and feedback message."""
+        return py_trees.display.unicode_tree(self.root, show_status=True)
 
     def current(self) -> str:
         """Name and feedback of the deepest running behaviour."""
@@ -157,8 +198,11 @@ class Session:
         out.mkdir(parents=True, exist_ok=True)
         write_result(out / "result.json", result)
         self.recorder.write_csv(out / "trajectory.csv")
+        self.observer.finish(result)
         return result
 
     def close(self) -> None:
+        """Close the observer's sinks (the recording is flushed), then the world."""
+        self.observer.close()
         with quiet_renderer():
             self.world.close()
