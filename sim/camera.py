@@ -19,7 +19,7 @@ from dataclasses import dataclass
 import numpy as np
 import pybullet as p
 
-from suture_bt.interfaces import CameraModel, StereoCameraModel, StereoFrame
+from suture_bt.interfaces import CameraModel, FrameLost, StereoCameraModel, StereoFrame
 from suture_bt.sim.rendering import MAX_TILE_HEIGHT, MAX_TILE_WIDTH, load_renderer
 from suture_bt.transforms import invert, make_transform, pose_to_transform
 
@@ -63,6 +63,16 @@ def stereo_model(
         T_cf_eye = make_transform(R_GL_CV, (side * EYE_HALF_BASELINE, 0.0, -EYE_SETBACK))
         eyes.append(CameraModel.from_fov(int(width), int(height), FOV_Y, T_cf @ T_cf_eye))
     return StereoCameraModel(left=eyes[0], right=eyes[1])
+
+
+@dataclass(frozen=True)
+class CaptureFault:
+    """What a fault does to one capture: lost (no images), or a gain and a light direction."""
+
+    lost: bool = False
+    reason: str = ""
+    gain: float = 1.0
+    light_direction: tuple[float, float, float] | None = None
 
 
 @dataclass(frozen=True)
@@ -215,6 +225,9 @@ class StereoEndoscope:
         self.rng = rng if rng is not None else np.random.default_rng(0)
         self._model = stereo_model(width, height, T_world_camframe)
         self._clock: Callable[[], float] | None = None
+        #: Called with the stamp of every capture (set by :mod:`suture_bt.sim.faults`); returns
+        #: a :class:`CaptureFault` or None (no fault).
+        self.fault_hook: Callable[[float], CaptureFault | None] | None = None
         self.renderer = load_renderer(client)
 
     @property
@@ -243,18 +256,30 @@ class StereoEndoscope:
         return render_view(self.client, self.eye(eye), with_segmentation)
 
     def capture(self, stamp: float | None = None) -> StereoFrame:
-        """Both eyes as a real camera delivers them: brightness and sensor noise applied."""
+        """Both eyes as a real camera delivers them: brightness and sensor noise applied.
+
+        Raises :class:`~suture_bt.interfaces.FrameLost` when the frame is lost (a fault);
+        darkening and lighting faults change the images instead.
+        """
         if stamp is None:
             stamp = self._clock() if self._clock is not None else 0.0
-        left = self._sensor(self.render("left", with_segmentation=False).rgb)
-        right = self._sensor(self.render("right", with_segmentation=False).rgb)
+        fault = self.fault_hook(float(stamp)) if self.fault_hook is not None else None
+        if fault is None:
+            left = self._sensor(self.render("left", with_segmentation=False).rgb)
+            right = self._sensor(self.render("right", with_segmentation=False).rgb)
+            return StereoFrame(left=left, right=right, stamp=float(stamp))
+        if fault.lost:
+            raise FrameLost(fault.reason or "frame lost", float(stamp))
+        light = fault.light_direction
+        views = [render_view(self.client, self.eye(e), False, light) for e in ("left", "right")]
+        left, right = (self._sensor(v.rgb, fault.gain) for v in views)
         return StereoFrame(left=left, right=right, stamp=float(stamp))
 
-    def _sensor(self, rgb: np.ndarray) -> np.ndarray:
-        if self.brightness == 1.0 and self.noise_std == 0.0:
+    def _sensor(self, rgb: np.ndarray, gain: float = 1.0) -> np.ndarray:
+        if self.brightness * gain == 1.0 and self.noise_std == 0.0:
             return rgb
         img = rgb.astype(np.float32)
-        img *= self.brightness
+        img *= self.brightness * gain
         if self.noise_std > 0:
             noise = self.rng.standard_normal(img.shape, dtype=np.float32)
             noise *= self.noise_std

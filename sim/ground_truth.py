@@ -39,6 +39,11 @@ class GroundTruth:
         """True tool-tip pose in the world."""
         return self._world.arms[arm].base_frame() @ self.tip_pose_base(arm)
 
+    def servo_plant(self, arm: str):
+        """The low-level servo plant of ``arm`` (per-joint bandwidth, damping, friction, load;
+        drawn from ``faults.servo`` ranges when the scene has them): never told to control."""
+        return self._world.arms[arm]._servo.plant
+
     def jaw_angle(self, arm: str) -> float:
         """True jaw opening (rad)."""
         return float(self._world.arms[arm].jaw.measured_jp()[0])
@@ -76,6 +81,17 @@ class GroundTruth:
     def needle_holders(self) -> list[str]:
         """All arms whose jaws hold the needle (two during a handover), latest grasp last."""
         return list(self._world.needle_holders)
+
+    # ---------------------------------------------------------------- faults
+    def fault_events(self) -> list:
+        """Every fault that fired so far (:class:`~suture_bt.sim.faults.FaultEvent`: kind,
+        time, source, arm, params), in order; ``servo_model`` events (t = 0) hold each arm's
+        drawn servo plant. Evaluation and tests only: skills must never see this."""
+        return list(self._world.faults.fired)
+
+    def pending_faults(self) -> list[tuple[float, str]]:
+        """Faults scheduled but not fired yet (a slip or drop waits for a held needle)."""
+        return self._world.faults.pending()
 
     # ---------------------------------------------------------------- camera
     def segmentation(self, eye: str = "left") -> dict[str, np.ndarray]:

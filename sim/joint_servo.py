@@ -29,6 +29,11 @@ semi-implicit Euler integrator is used (ω·dt ≈ 0.04, stable).
 
 ``ideal=True`` (scene ``servo.error_model: false``) makes the joints follow the set-point
 exactly, for tests that need an exact arm.
+
+"The robot is not the model": a :class:`JointPlant` gives every joint its own bandwidth,
+damping, friction and load scale (drawn per run from the scene's ``faults.servo`` ranges by
+:func:`suture_bt.sim.faults.draw_plant`); without one, all joints share :class:`ServoParams`
+and the arithmetic is exactly that of a single shared plant.
 """
 
 from __future__ import annotations
@@ -63,20 +68,50 @@ class ServoParams:
         return np.where(JOINT_IS_PRISMATIC, pri, rev)
 
 
+@dataclass(frozen=True)
+class JointPlant:
+    """Per-joint plant: bandwidth (Hz), damping ratio, friction e_f (rad or m), load scale."""
+
+    bandwidth_hz: tuple[float, ...]
+    damping_ratio: tuple[float, ...]
+    error_scale: tuple[float, ...]
+    load_scale: tuple[float, ...]
+
+    @classmethod
+    def uniform(cls, params: ServoParams) -> JointPlant:
+        """Every joint with the shared parameters (the scene's ``servo`` section)."""
+        return cls(
+            (params.bandwidth_hz,) * 6,
+            (params.damping_ratio,) * 6,
+            tuple(float(v) for v in params.error_scale),
+            (1.0,) * 6,
+        )
+
+    def as_dict(self) -> dict[str, list[float]]:
+        """Plain lists, for records and JSON."""
+        return {k: list(getattr(self, k)) for k in self.__dataclass_fields__}
+
+
 class JointServo:
     """Six joints driven toward a set-point; ``step(dt)`` integrates one physics step."""
 
-    def __init__(self, q0, params: ServoParams | None = None):
+    def __init__(self, q0, params: ServoParams | None = None, plant: JointPlant | None = None):
         self.params = params or ServoParams()
+        self.plant = plant or JointPlant.uniform(self.params)
         self.q = np.array(q0, dtype=float)
         self.qd = np.zeros(6)
         self.setpoint = self.q.copy()
-        w = 2 * np.pi * self.params.bandwidth_hz
-        self.kp = w * w
-        self.kd = 2 * self.params.damping_ratio * w
-        self.friction = self.kp * self.params.error_scale
+        # Per joint, with the same float operations as one shared plant (identical results).
+        w = [2 * np.pi * b for b in self.plant.bandwidth_hz]
+        self._kp = [x * x for x in w]
+        self._kd = [2 * z * x for z, x in zip(self.plant.damping_ratio, w, strict=True)]
+        self.kp = np.array(self._kp)
+        self.kd = np.array(self._kd)
+        self.friction = self.kp * np.array(self.plant.error_scale)
         self.effort = np.zeros(6)
         self._friction = self.friction.tolist()
+        s = [0.5 * self.params.gravity_load * x for x in self.plant.load_scale]
+        self._load_gain = s if any(x != s[0] for x in s) else None
         self._lo = JOINT_LIMITS[:, 0].tolist()
         self._hi = JOINT_LIMITS[:, 1].tolist()
 
@@ -89,9 +124,11 @@ class JointServo:
     def load(self, q: np.ndarray) -> np.ndarray:
         """Configuration-dependent load (per unit inertia) on each joint."""
         g = np.zeros(6)
-        s = 0.5 * self.params.gravity_load
-        g[1] = s * self._friction[1] * math.cos(q[1]) * (q[2] / 0.15)
-        g[2] = s * self._friction[2] * math.cos(q[1]) * math.cos(q[0])
+        s1 = s2 = 0.5 * self.params.gravity_load
+        if self._load_gain is not None:
+            s1, s2 = self._load_gain[1], self._load_gain[2]
+        g[1] = s1 * self._friction[1] * math.cos(q[1]) * (q[2] / 0.15)
+        g[2] = s2 * self._friction[2] * math.cos(q[1]) * math.cos(q[0])
         return g
 
     def step(self, dt: float) -> None:
@@ -104,11 +141,11 @@ class JointServo:
         # Six scalar joints: a plain loop is several times faster than numpy on 6-vectors.
         q, qd, sp = self.q.tolist(), self.qd.tolist(), self.setpoint.tolist()
         load = self.load(self.q).tolist()
-        kp, kd = self.kp, self.kd
+        kp, kd = self._kp, self._kd
         q_new, qd_new, effort = [0.0] * 6, [0.0] * 6, [0.0] * 6
         for i in range(6):
             f = self._friction[i]
-            drive = kp * (sp[i] - q[i]) - kd * qd[i] - load[i]
+            drive = kp[i] * (sp[i] - q[i]) - kd[i] * qd[i] - load[i]
             effort[i] = drive
             v = qd[i]
             if abs(v) > _STICK_VELOCITY:

@@ -17,6 +17,18 @@ from typing import Any
 import numpy as np
 import yaml
 
+from suture_bt.sim.fault_config import FaultConfig, parse_faults
+from suture_bt.sim.scene_fields import (
+    SceneError,
+    _bool,
+    _fail,
+    _mapping,
+    _non_negative,
+    _number,
+    _positive,
+    _positive_int,
+    _vector,
+)
 from suture_bt.transforms import pose_to_transform
 
 #: SRC evaluation conditions of the hidden joint offset (DESIGN.md §5), in (deg, deg, mm).
@@ -25,10 +37,6 @@ SRC_OFFSET_CONDITIONS = {"A": (0.0, 0.0, 0.0), "B": (2.52, -0.46, 4.0), "C": (2.
 OFFSET_BOUND = (5.0, 5.0, 5.0)
 NEEDLE_STARTS = ("resting", "in_psm2_jaw", "pose")
 ARM_NAMES = ("psm1", "psm2")
-
-
-class SceneError(ValueError):
-    """A scene file is invalid; the message is one line naming the field."""
 
 
 @dataclass(frozen=True)
@@ -98,6 +106,7 @@ class SceneConfig:
     arms: dict[str, ArmConfig]
     servo: ServoConfig
     camera: CameraConfig
+    faults: FaultConfig = FaultConfig()
 
     def joint_offset(self, arm: str) -> np.ndarray:
         """The hidden offset Δq (6 values, SI units, joints 1-3 non-zero) of ``arm``.
@@ -118,60 +127,6 @@ class SceneConfig:
         return np.array(
             [math.radians(triple[0]), math.radians(triple[1]), triple[2] * 1e-3, 0.0, 0.0, 0.0]
         )
-
-
-# --------------------------------------------------------------------------- validation helpers
-
-
-def _fail(path: str, expected: str, got: Any) -> None:
-    raise SceneError(f"{path}: expected {expected}, got {got!r}")
-
-
-def _mapping(value: Any, path: str, allowed: tuple[str, ...]) -> dict:
-    if not isinstance(value, dict):
-        _fail(path, "a mapping", value)
-    for key in value:
-        if key not in allowed:
-            raise SceneError(f"{path}.{key}: unknown key (allowed: {', '.join(allowed)})")
-    return value
-
-
-def _number(value: Any, path: str) -> float:
-    if isinstance(value, bool) or not isinstance(value, int | float) or not math.isfinite(value):
-        _fail(path, "a finite number", value)
-    return float(value)
-
-
-def _positive(value: Any, path: str) -> float:
-    v = _number(value, path) if isinstance(value, int | float) else None
-    if v is None or v <= 0:
-        _fail(path, "a positive number", value)
-    return v
-
-
-def _non_negative(value: Any, path: str) -> float:
-    v = _number(value, path) if isinstance(value, int | float) else None
-    if v is None or v < 0:
-        _fail(path, "a non-negative number", value)
-    return v
-
-
-def _positive_int(value: Any, path: str) -> int:
-    if isinstance(value, bool) or not isinstance(value, int) or value <= 0:
-        _fail(path, "a positive integer", value)
-    return int(value)
-
-
-def _vector(value: Any, path: str, n: int) -> tuple[float, ...]:
-    if not isinstance(value, list | tuple) or len(value) != n:
-        _fail(path, f"a list of {n} numbers", value)
-    return tuple(_number(v, f"{path}[{i}]") for i, v in enumerate(value))
-
-
-def _bool(value: Any, path: str) -> bool:
-    if not isinstance(value, bool):
-        _fail(path, "true or false", value)
-    return value
 
 
 def _merge(default: dict, override: dict) -> dict:
@@ -214,7 +169,9 @@ def _initial_jp(value: Any, path: str) -> tuple[float, ...]:
 
 def _parse(raw: Any) -> SceneConfig:
     top = _mapping(
-        raw, "scene", ("seed", "physics", "phantom", "needle", "arms", "servo", "camera")
+        raw,
+        "scene",
+        ("seed", "physics", "phantom", "needle", "arms", "servo", "camera", "faults"),
     )
     seed = top["seed"]
     if isinstance(seed, bool) or not isinstance(seed, int) or seed < 0:
@@ -287,7 +244,14 @@ def _parse(raw: Any) -> SceneConfig:
         _non_negative(cam["noise_std"], "scene.camera.noise_std"),
         _positive(cam["brightness"], "scene.camera.brightness"),
     )
-    return SceneConfig(seed, rate, phantom, needle, arms, servo, camera)
+    faults = parse_faults(top.get("faults"), "scene.faults")
+    if faults.servo is not None and faults.servo.bandwidth_hz[1] > rate / 20:
+        _fail(
+            "scene.faults.servo.bandwidth_hz",
+            f"at most physics rate / 20 = {rate / 20:g}",
+            list(faults.servo.bandwidth_hz),
+        )
+    return SceneConfig(seed, rate, phantom, needle, arms, servo, camera, faults)
 
 
 def _default_raw() -> dict:
@@ -315,7 +279,7 @@ def _check_known(value: dict, reference: dict, path: str) -> None:
     for key, v in value.items():
         if key not in reference:
             raise SceneError(f"{path}.{key}: unknown key (allowed: {', '.join(reference)})")
-        if isinstance(reference[key], dict):
+        if isinstance(reference[key], dict) and key != "faults":
             if not isinstance(v, dict):
                 _fail(f"{path}.{key}", "a mapping", v)
             _check_known(v, reference[key], f"{path}.{key}")

@@ -227,5 +227,19 @@ class SimulatedPSM:
         """True Δq: private, read only by ``ground_truth``."""
         return self._offset.delta_q
 
+    def _set_true_offset(self, delta_q) -> None:
+        """Change the hidden Δq (joint-offset drift, :mod:`suture_bt.sim.faults`).
+
+        The encoders keep reading q − Δq and the set-point keeps its measured value, so the
+        joints move by the change while the readings stay where they were: a drift shows only
+        in images, like the offset itself.
+        """
+        self._offset = JointOffset(delta_q)
+        self._servo.setpoint = self._offset.actuated(self._setpoint)
+
+    def _true_speed(self) -> float:
+        """Largest true joint speed (rad/s or m/s): is the arm moving (faults: mid-move)."""
+        return float(np.max(np.abs(self._servo.qd)))
+
 
 __all__ = ["JOINT_LIMITS", "JointLimitError", "MinJerkTrajectory", "SimulatedJaw", "SimulatedPSM"]

@@ -29,6 +29,7 @@ from suture_bt.geometry import NeedleModel, PhantomModel
 from suture_bt.kinematics import forward_kinematics
 from suture_bt.kinematics.psm import JAW_CLOSED_THRESHOLD
 from suture_bt.sim.camera import StereoEndoscope
+from suture_bt.sim.faults import WorldFaults, draw_plant
 from suture_bt.sim.grasp import GraspCheck, check_grasp
 from suture_bt.sim.joint_offsets import JointOffset
 from suture_bt.sim.joint_servo import JointServo, ServoParams
@@ -155,7 +156,7 @@ class World:
         for arm in ("psm1", "psm2"):
             offset = JointOffset(self.scene.joint_offset(arm))
             q_true = offset.actuated(self.scene.arms[arm].initial_jp)
-            servo = JointServo(q_true, params)
+            servo = JointServo(q_true, params, draw_plant(self.scene, arm))
             body = PSMBody(self.client, psm_base_frame(arm), q_true, name=arm)
             self.arms[arm] = SimulatedPSM(arm, body, servo, offset, self.clock)
         self.psm1 = self.arms["psm1"]
@@ -169,6 +170,8 @@ class World:
             a: arm.jaw.measured_jp()[0] <= JAW_CLOSED_THRESHOLD for a, arm in self.arms.items()
         }
         self._build_task_bodies(with_camera)
+        #: Faults (scene-driven and forced by tests): see :mod:`suture_bt.sim.faults`.
+        self.faults = WorldFaults(self)
 
     @classmethod
     def from_scene(cls, scene: SceneConfig | None = None, with_camera: bool = True) -> World:
@@ -353,6 +356,8 @@ class World:
             arm.sync_body()
         if last or tick % BOOKKEEPING_TICKS == 0:
             self._after_physics(t)
+            if self.faults.active:  # never with no faults: the world runs as without them
+                self.faults.tick(t)
 
     def _grasp_and_release(self) -> None:
         """Release when a holding jaw is commanded open; try a grasp when a jaw closes."""

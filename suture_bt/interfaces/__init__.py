@@ -3,6 +3,7 @@
 from suture_bt.interfaces.camera_model import CameraModel, StereoCameraModel
 from suture_bt.interfaces.robot import (
     Clock,
+    FrameLost,
     JawInterface,
     JointState,
     PSMInterface,
@@ -14,6 +15,7 @@ from suture_bt.interfaces.robot import (
 __all__ = [
     "CameraModel",
     "Clock",
+    "FrameLost",
     "JawInterface",
     "JointState",
     "PSMInterface",

@@ -68,9 +68,30 @@ class StereoFrame:
     stamp: float
 
 
+class FrameLost(RuntimeError):
+    """``capture()`` got no frame this time (dropped or corrupt); nothing is wrong with the scene.
+
+    Why an exception: a lost frame has no images, and a caller that ignores the failure must
+    not go on with stale or empty arrays. ``reason`` says what happened, ``stamp`` is the
+    (simulated) time of the failed capture. Capturing again later may succeed; a darkened or
+    re-lit frame is *not* lost (it comes back as a normal, darker :class:`StereoFrame`).
+    """
+
+    def __init__(self, reason: str = "frame lost", stamp: float = 0.0):
+        super().__init__(f"{reason} (at t = {stamp:.3f} s)")
+        self.reason = reason
+        self.stamp = float(stamp)
+
+    def __reduce__(self):
+        return (type(self), (self.reason, self.stamp))
+
+
 @runtime_checkable
 class StereoCameraInterface(Protocol):
-    """The stereo endoscope: images plus the (known, calibrated) camera model."""
+    """The stereo endoscope: images plus the (known, calibrated) camera model.
+
+    ``capture()`` returns both eyes, or raises :class:`FrameLost` when the frame is lost.
+    """
 
     def capture(self) -> StereoFrame: ...
     @property
