@@ -1,21 +1,182 @@
 """``suture-bt eval``: a randomized evaluation campaign scored by the SRC rules (issue 18).
 
 N seeded trials, each a full run whose scene is drawn from the trial's seed, on a local
-process pool (default) or a Ray cluster; resumable (finished trials are skipped) and
-crash-isolated (a trial that raises, dies or runs out of time is an error with its reason).
-Writes ``results.json``, ``summary.md`` and PNG plots into ``--out``.
+process pool (default) or a Ray cluster; resumable (re-running the same command skips finished
+trials) and crash-isolated (a trial that raises, dies or runs out of time is an error with its
+reason). Writes ``results.json``, ``summary.md`` and PNG plots into ``--out``; each trial keeps
+``result.json``, ``trajectory.csv`` and the ``scene.yaml`` that replays it with ``suture-bt run``.
 """
 
 from __future__ import annotations
+
+import signal
+import sys
+from pathlib import Path
+
+from suture_bt.trees import TREE_NAMES
 
 
 def register(subparsers) -> None:
     """Add the ``eval`` subcommand."""
     p = subparsers.add_parser("eval", help="randomized evaluation campaign (SRC scoring, report)")
     p.add_argument("--trials", type=int, required=True, metavar="N", help="number of trials")
+    where = p.add_mutually_exclusive_group()
+    where.add_argument(
+        "--workers", type=int, metavar="K", help="local trial processes (default: CPUs)"
+    )
+    where.add_argument(
+        "--ray",
+        metavar="ADDRESS",
+        help="run on Ray: 'local' starts a local instance, 'auto' or ray://host:port connects "
+        "(needs pip install 'suture-bt[ray]')",
+    )
+    p.add_argument("--scene", metavar="FILE", help="base scene YAML (drawn fields replace its own)")
+    p.add_argument(
+        "--faults", default="none", metavar="PROFILE", help="fault profile: none, mild, harsh"
+    )
+    p.add_argument("--tree", default="multi_throw", help=f"tree: {', '.join(TREE_NAMES)}")
+    p.add_argument("--oracle", action="store_true", help="ABLATION: ground truth fed to skills")
+    p.add_argument("--out", metavar="DIR", default="out/eval", help="campaign directory")
+    p.add_argument("--seed", type=int, default=0, metavar="N", help="seed of trial 0 (default 0)")
+    p.add_argument(
+        "--policy",
+        choices=("stop", "continue"),
+        default="stop",
+        help="after a failed throw: end the trial (stop) or go on (continue)",
+    )
+    p.add_argument(
+        "--time-budget",
+        type=float,
+        default=600.0,
+        metavar="S",
+        help="wall-clock seconds a trial may take before it is an error (default 600)",
+    )
+    p.add_argument(
+        "--resting-fraction",
+        type=float,
+        default=0.0,
+        metavar="F",
+        help="share of trials whose needle starts resting on the tissue (default 0: "
+        "all in PSM2's jaw)",
+    )
+    p.add_argument(
+        "--servo",
+        choices=("nominal", "drawn"),
+        default="nominal",
+        help="low-level servo parameters: nominal, or drawn per trial from ranges",
+    )
+    p.add_argument(
+        "--retry-errors",
+        action="store_true",
+        help="run trials that ended in an error again (finished ones are skipped)",
+    )
+    p.add_argument(
+        "--report-only",
+        action="store_true",
+        help="write the report from the trials already in DIR; run nothing",
+    )
     p.set_defaults(func=run)
 
 
+def _config(args):
+    """The campaign configuration from the arguments (one-line errors for bad ones)."""
+    import yaml
+
+    from suture_bt.campaign.randomize import CampaignConfig, Randomization, faults_supported
+    from suture_bt.sim.scene import load_scene
+
+    if args.tree not in TREE_NAMES:
+        raise ValueError(f"unknown tree {args.tree!r}; choose one of: {', '.join(TREE_NAMES)}")
+    raw = {}
+    if args.scene:
+        load_scene(args.scene)  # validates, with the scene's own one-line errors
+        raw = yaml.safe_load(Path(args.scene).read_text()) or {}
+    if args.faults not in ("none", "mild", "harsh"):
+        raise ValueError(f"unknown fault profile {args.faults!r}; choose none, mild or harsh")
+    if args.faults != "none" and not faults_supported():
+        raise ValueError("fault profiles not available yet")
+    return CampaignConfig(
+        seed=args.seed,
+        tree=args.tree,
+        scene=args.scene,
+        scene_raw=raw,
+        faults=args.faults,
+        oracle=args.oracle,
+        policy=args.policy,
+        randomization=Randomization(resting_fraction=args.resting_fraction, servo=args.servo),
+    )
+
+
+class Progress:
+    """A tqdm bar over the trials with the pass rate so far."""
+
+    def __init__(self, total: int, done: int, passed: int, errors: int):
+        from tqdm import tqdm
+
+        self.passed, self.errors, self.seen = passed, errors, done
+        self.bar = tqdm(
+            total=total, initial=done, unit="trial", file=sys.stderr, dynamic_ncols=True
+        )
+        self._postfix()
+
+    def _postfix(self) -> None:
+        rate = f"{100 * self.passed / self.seen:.0f}%" if self.seen else "-"
+        self.bar.set_postfix_str(f"passed {self.passed}/{self.seen} ({rate}), errors {self.errors}")
+
+    def __call__(self, doc, tally) -> None:
+        self.seen += 1
+        self.passed = self._base_passed + tally.passed
+        self.errors = self._base_errors + tally.errors
+        self.bar.update(1)
+        self._postfix()
+
+    def start(self) -> Progress:
+        self._base_passed, self._base_errors = self.passed, self.errors
+        return self
+
+    def close(self) -> None:
+        self.bar.close()
+
+
 def run(args) -> int:
-    """Run the campaign; exit status 0 when every trial ran (passed or failed), 1 on errors."""
-    raise ValueError("suture-bt eval is not implemented yet")
+    """Run (or resume) the campaign and write its report; exit 1 when a trial errored."""
+    from suture_bt.campaign.campaign import load_trials, run_campaign
+    from suture_bt.campaign.report import write_report
+    from suture_bt.campaign.runner import default_workers
+
+    config = _config(args)
+    out = Path(args.out)
+    if not args.report_only:
+        before = load_trials(out, args.trials) if (out / "trials").is_dir() else []
+        ok = [d for d in before if d["status"] == "ok"]
+        progress = Progress(
+            args.trials,
+            len(before) if not args.retry_errors else len(ok),
+            sum(bool(d["result"] and d["result"].get("passed")) for d in ok),
+            0 if args.retry_errors else len(before) - len(ok),
+        ).start()
+        signal.signal(signal.SIGTERM, signal.default_int_handler)  # kill = Ctrl-C: clean up
+        label = f"Ray ({args.ray})" if args.ray else f"{args.workers or default_workers()} workers"
+        print(f"suture-bt eval: {args.trials} trials on {label} -> {out}", file=sys.stderr)
+        try:
+            tally = run_campaign(
+                config,
+                args.trials,
+                out,
+                workers=args.workers or default_workers(),
+                use_ray=bool(args.ray),
+                ray_address=args.ray,
+                budget_s=args.time_budget,
+                retry_errors=args.retry_errors,
+                on_record=progress,
+            )
+        finally:
+            progress.close()
+        print(
+            f"ran {tally.ran} trials ({tally.skipped} already finished) in {tally.wall_s:.0f} s",
+            file=sys.stderr,
+        )
+    summary = write_report(out, args.trials)
+    print(summary.headline)
+    print(f"report: {out / 'summary.md'}, {out / 'results.json'}")
+    return 1 if summary.errors else 0

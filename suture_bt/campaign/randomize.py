@@ -1,0 +1,192 @@
+"""What a campaign varies, and each trial's draw from its own seed.
+
+A trial's scene is the base scene (the embedded SRC scene at the Task 3 start, or ``--scene``)
+with these fields replaced by values drawn from ``numpy.random.default_rng([seed, stream])``,
+one stream per aspect, so adding an aspect never changes the others' draws and the same seed
+gives the same scene on any machine or backend:
+
+* both arms' hidden joint offsets, uniform over the full SRC bounds (±5°, ±5°, ±5 mm);
+* the needle start: in PSM2's jaw at a drawn grasp arc angle, or (with ``resting_fraction``
+  > 0) resting at the SRC start pose; the default is jaw-only, because resting starts are not
+  yet reliable in the tree;
+* the phantom pose, jittered within the arms' reach: a few mm, a few degrees about the
+  vertical, at most ``tilt_deg`` of tilt (larger moves are known to fail);
+* the camera's noise and brightness (inside the perception training ranges);
+* the low-level servo's parameters, when ``servo = "drawn"`` (nominal by default: the PI
+  servo's feed-forward still assumes the nominal 6 Hz plant, see issue 16);
+* the fault profile, when the scene parser knows ``faults:``.
+"""
+
+from __future__ import annotations
+
+import hashlib
+import json
+from dataclasses import asdict, dataclass, field
+from typing import Any
+
+import numpy as np
+
+#: Hidden joint-offset bounds (deg, deg, mm): the full SRC range (DESIGN.md §5).
+OFFSET_BOUND = (5.0, 5.0, 5.0)
+ARMS = ("psm1", "psm2")
+#: Independent random streams, one per aspect of a trial.
+STREAMS = {"offsets": 1, "needle": 2, "phantom": 3, "camera": 4, "servo": 5}
+#: Servo parameter ranges for ``servo = "drawn"`` (issue 16's "robot is not the model").
+SERVO_RANGES = {
+    "bandwidth_hz": (3.0, 12.0),
+    "damping_ratio": (0.7, 1.3),
+    "revolute_friction_deg": (0.5, 2.5),
+    "prismatic_friction_mm": (0.03, 0.2),
+    "gravity_load": (0.8, 1.2),
+}
+
+
+@dataclass(frozen=True)
+class Randomization:
+    """The ranges a campaign draws from (all symmetric ranges are ± the value)."""
+
+    grasp_arc_deg: tuple[float, float] = (145.0, 165.0)
+    resting_fraction: float = 0.0
+    phantom_xy_mm: float = 3.0
+    phantom_z_mm: float = 1.5
+    phantom_yaw_deg: float = 3.0
+    tilt_deg: float = 1.5
+    noise_std: tuple[float, float] = (0.0, 3.0)
+    brightness: tuple[float, float] = (0.8, 1.25)
+    servo: str = "nominal"  # "nominal" | "drawn"
+
+    def __post_init__(self) -> None:
+        """Reject ranges a trial could not be built from."""
+        lo, hi = self.grasp_arc_deg
+        if not 57.0 <= lo <= hi <= 180.0:
+            raise ValueError(f"grasp arc range must lie in [57, 180] deg, got {lo}..{hi}")
+        if not 0.0 <= self.resting_fraction <= 1.0:
+            raise ValueError(f"resting fraction must be in [0, 1], got {self.resting_fraction}")
+        if not 0.0 <= self.tilt_deg <= 2.0:
+            raise ValueError(f"phantom tilt must be at most 2 deg, got {self.tilt_deg}")
+        if self.servo not in ("nominal", "drawn"):
+            raise ValueError(f"servo must be nominal or drawn, got {self.servo!r}")
+
+
+@dataclass(frozen=True)
+class CampaignConfig:
+    """Everything that decides a campaign's trials (the trial count aside)."""
+
+    seed: int = 0
+    tree: str = "multi_throw"
+    scene: str | None = None
+    scene_raw: dict[str, Any] = field(default_factory=dict)
+    faults: str = "none"
+    oracle: bool = False
+    policy: str = "stop"
+    max_sim_time: float = 300.0
+    randomization: Randomization = field(default_factory=Randomization)
+
+    def to_dict(self) -> dict[str, Any]:
+        """JSON-ready form (stored in ``campaign.json``)."""
+        return asdict(self)
+
+    @property
+    def fingerprint(self) -> str:
+        """Short hash of everything that decides the trials (the scene's content, not its
+        path): a resumed campaign must match."""
+        doc = {k: v for k, v in self.to_dict().items() if k != "scene"}
+        text = json.dumps(doc, sort_keys=True, default=str)
+        return hashlib.sha256(text.encode()).hexdigest()[:16]
+
+
+def trial_seed(config: CampaignConfig, index: int) -> int:
+    """Seed of trial ``index``: consecutive from the campaign seed."""
+    return int(config.seed) + int(index)
+
+
+def _rng(seed: int, aspect: str) -> np.random.Generator:
+    """The random stream of one aspect of one trial."""
+    return np.random.default_rng([seed, 18, STREAMS[aspect]])
+
+
+def _r(x: float, digits: int = 4) -> float:
+    """Round a draw so that it survives JSON and YAML exactly."""
+    return round(float(x), digits)
+
+
+def draw(config: CampaignConfig, index: int) -> dict[str, Any]:
+    """Trial ``index``'s draws as scene overrides (same layout as a scene file)."""
+    seed, rz = trial_seed(config, index), config.randomization
+    out: dict[str, Any] = {"seed": seed}
+    g = _rng(seed, "offsets")
+    out["arms"] = {
+        arm: {"joint_offset": [_r(v, 3) for v in g.uniform(-1.0, 1.0, 3) * OFFSET_BOUND]}
+        for arm in ARMS
+    }
+    g = _rng(seed, "needle")
+    resting = bool(g.random() < rz.resting_fraction)
+    grasp = _r(g.uniform(*rz.grasp_arc_deg), 2)
+    out["needle"] = (
+        {"start": "resting"}
+        if resting
+        else {
+            "start": "in_psm2_jaw",
+            "grasp_arc_angle_deg": grasp,
+        }
+    )
+    g = _rng(seed, "phantom")
+    xy = g.uniform(-1.0, 1.0, 2) * rz.phantom_xy_mm * 1e-3
+    z = g.uniform(-1.0, 1.0) * rz.phantom_z_mm * 1e-3
+    roll, pitch = np.deg2rad(g.uniform(-1.0, 1.0, 2) * rz.tilt_deg)
+    yaw = np.deg2rad(g.uniform(-1.0, 1.0) * rz.phantom_yaw_deg)
+    base_phantom = config.scene_raw.get("phantom", {})
+    p0 = base_phantom.get("position", [0.0, 0.0, 0.0])
+    r0 = base_phantom.get("rpy", [0.0, 0.0, 0.0])
+    out["phantom"] = {
+        "position": [_r(p0[0] + xy[0], 6), _r(p0[1] + xy[1], 6), _r(p0[2] + z, 6)],
+        "rpy": [_r(r0[0] + roll, 6), _r(r0[1] + pitch, 6), _r(r0[2] + yaw, 6)],
+    }
+    g = _rng(seed, "camera")
+    out["camera"] = {
+        "noise_std": _r(g.uniform(*rz.noise_std), 3),
+        "brightness": _r(g.uniform(*rz.brightness), 3),
+    }
+    if rz.servo == "drawn":
+        g = _rng(seed, "servo")
+        out["servo"] = {k: _r(g.uniform(lo, hi), 4) for k, (lo, hi) in SERVO_RANGES.items()}
+    if config.faults != "none":
+        out["faults"] = config.faults
+    return out
+
+
+def merge(base: dict[str, Any], override: dict[str, Any]) -> dict[str, Any]:
+    """Deep merge of plain dicts (override wins)."""
+    merged = dict(base)
+    for k, v in override.items():
+        if isinstance(v, dict) and isinstance(merged.get(k), dict):
+            merged[k] = merge(merged[k], v)
+        else:
+            merged[k] = v
+    return merged
+
+
+def trial_scene_dict(config: CampaignConfig, index: int) -> dict[str, Any]:
+    """The full override dict of trial ``index``: the base scene file's keys, then the draws."""
+    return merge(config.scene_raw, draw(config, index))
+
+
+def offset_magnitude(scene: dict[str, Any]) -> float:
+    """Largest normalised joint offset of a trial's arms (|Δq_j| / bound_j, 0..1)."""
+    worst = 0.0
+    for arm in ARMS:
+        spec = scene.get("arms", {}).get(arm, {}).get("joint_offset")
+        if isinstance(spec, list | tuple):
+            worst = max(worst, *(abs(v) / b for v, b in zip(spec, OFFSET_BOUND, strict=True)))
+    return worst
+
+
+def faults_supported() -> bool:
+    """Whether the scene parser knows a ``faults:`` section (issue 16 adds it)."""
+    from suture_bt.sim.scene import SceneError, scene_from_dict
+
+    try:
+        scene_from_dict({"faults": "none"})
+    except SceneError:
+        return False
+    return True
