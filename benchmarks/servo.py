@@ -1,5 +1,10 @@
 """Benchmark: joint tracking error of the low-level servo alone vs. with the high-level PI loop.
 
+Across plants: the robot is not the model, so the low-level servo's bandwidth and friction
+are swept (``--bandwidths``, ``--frictions``; every joint of both arms set to the value) and
+the default (adaptive) PI loop is compared with the fixed-gain loop tuned for the nominal
+6 Hz servo (``PIGains(adaptive=False)``). The controller is told nothing about the plant.
+
 Both arms of the real simulated World (servo error model on, zero joint offset) run the same
 fixed, seeded set of random in-limit joint moves (trapezoidal timing at the default joint
 limits), each followed by a hold. The true joints (ground truth) are compared with the desired
@@ -10,6 +15,7 @@ of each hold; ``reduction`` = 1 − steady_state_pi / steady_state_lowlevel (the
 low-level error removed, the seed's 98 %); ``reduction_rms`` the same for the RMS error.
 
     .venv/bin/python benchmarks/servo.py [--json PATH] [--moves N] [--hold S] [--seed K]
+        [--bandwidths 3,6,12] [--frictions 0.5,1.5,2.5]
 """
 
 from __future__ import annotations
@@ -21,7 +27,7 @@ import time
 
 import numpy as np
 
-from suture_bt.control import PIServo
+from suture_bt.control import PIGains, PIServo
 from suture_bt.kinematics import JOINT_LIMITS
 from suture_bt.planning import JointMove
 from suture_bt.sim.ground_truth import GroundTruth
@@ -44,12 +50,21 @@ def random_targets(rng: np.random.Generator, n: int) -> np.ndarray:
     return q
 
 
-def run(pi: bool, targets: dict[str, np.ndarray], hold: float) -> dict[str, dict[str, np.ndarray]]:
-    """Errors (true − desired) per arm: all samples, and the settled samples of each hold."""
-    scene = scene_from_dict({"servo": {"error_model": True}})
+def run(
+    pi: bool,
+    targets: dict[str, np.ndarray],
+    hold: float,
+    servo: dict | None = None,
+    gains: PIGains | None = None,
+) -> dict[str, dict[str, np.ndarray]]:
+    """Errors (true − desired) per arm: all samples, and the settled samples of each hold.
+
+    ``servo`` overrides the scene's low-level servo section (the plant); ``gains`` the PI's.
+    """
+    scene = scene_from_dict({"servo": {"error_model": True, **(servo or {})}})
     with World.from_scene(scene, with_camera=False) as world:
         truth = GroundTruth(world)
-        servos = {a: PIServo(getattr(world, a), enabled=pi) for a in ARMS}
+        servos = {a: PIServo(getattr(world, a), enabled=pi, gains=gains) for a in ARMS}
         for s in servos.values():
             s.reset()
             s.attach(world.add_periodic)
@@ -106,12 +121,52 @@ def figures(low: dict[str, np.ndarray], pi: dict[str, np.ndarray]) -> dict[str, 
     return out
 
 
+def sweep(
+    targets: dict[str, np.ndarray], hold: float, bandwidths: list[float], frictions: list[float]
+) -> list[dict]:
+    """Steady-state reduction per plant (bandwidth × friction), adaptive vs fixed gains."""
+    rows = []
+    for bw in bandwidths:
+        for fr in frictions:
+            plant = {
+                "bandwidth_hz": bw,
+                "revolute_friction_deg": fr,
+                "prismatic_friction_mm": 0.1 * fr / 1.5,
+            }
+            low = run(False, targets, hold, plant)
+            row = {"bandwidth_hz": bw, "friction_deg": fr}
+            for name, gains in (("adaptive", None), ("fixed", PIGains(adaptive=False))):
+                pi = run(True, targets, hold, plant, gains)
+                for a in ARMS:
+                    f = figures(low[a], pi[a])
+                    row[f"{a}_{name}"] = f["reduction"]
+                    row[f"{a}_{name}_mm"] = f["reduction_mm"]
+                    row[f"{a}_lowlevel_deg"] = f["steady_state_error_lowlevel_deg"]
+            rows.append(row)
+            print(
+                f"{bw:6.1f} Hz {fr:5.2f}°  "
+                + "  ".join(
+                    f"{a}: {row[f'{a}_adaptive']:7.2%} ({row[f'{a}_adaptive_mm']:7.2%}) "
+                    f"fixed {row[f'{a}_fixed']:7.2%} ({row[f'{a}_fixed_mm']:7.2%})"
+                    for a in ARMS
+                ),
+                flush=True,
+            )
+    return rows
+
+
+def _floats(text: str) -> list[float]:
+    return [float(v) for v in text.split(",") if v.strip()]
+
+
 def main(argv: list[str] | None = None) -> int:
     p = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     p.add_argument("--json", metavar="PATH", help="write the figures as JSON")
     p.add_argument("--moves", type=int, default=8, help="random moves per arm (default 8)")
     p.add_argument("--hold", type=float, default=1.0, help="hold after each move, s")
     p.add_argument("--seed", type=int, default=7)
+    p.add_argument("--bandwidths", default="3,6,12", help="plant bandwidths to sweep, Hz")
+    p.add_argument("--frictions", default="0.5,1.5,2.5", help="revolute frictions to sweep, deg")
     args = p.parse_args(argv)
     if args.moves < 1 or args.hold < 2 * SETTLE_WINDOW:
         p.error(f"need --moves ≥ 1 and --hold ≥ {2 * SETTLE_WINDOW} s")
@@ -130,6 +185,12 @@ def main(argv: list[str] | None = None) -> int:
     print(f"{'figure':34s} {'psm1':>10s} {'psm2':>10s}")
     for k in keys:
         print(f"{k:34s} {result['psm1'][k]:10.4f} {result['psm2'][k]:10.4f}")
+    print(
+        "\nsteady-state error removed per plant, revolute (prismatic); adaptive = default loop, "
+        "fixed = gains of the nominal 6 Hz plant"
+    )
+    result["sweep"] = sweep(targets, args.hold, _floats(args.bandwidths), _floats(args.frictions))
+    result["wall_s"] = time.perf_counter() - t0
     print(f"wall time {result['wall_s']:.1f} s")
     if args.json:
         with open(args.json, "w") as f:

@@ -184,7 +184,8 @@ class StictionArm(LaggingArm):
 def _peak_stiction_error(direction_memory: bool, seconds: float, desired) -> float:
     """Peak joint-1 error after t = 2 s of the PI servo on stiction, commanded desired(t, dt)."""
     arm = StictionArm()
-    pi = PIServo(arm, gains=PIGains(direction_memory=direction_memory))
+    # Fixed gains: this isolates the direction memory on a first-order toy plant.
+    pi = PIServo(arm, gains=PIGains(direction_memory=direction_memory, adaptive=False))
     every = round(pi.dt / PHYSICS_DT)
     peak = 0.0
     for k in range(round(seconds / PHYSICS_DT)):
@@ -257,3 +258,61 @@ def test_followed_move_runs_at_the_loop_rate_whatever_the_callers_step():
     np.testing.assert_allclose(coarse[-1], fine_move.waypoints[-1], atol=1e-5)
     with pytest.raises(ValueError, match="sink"):
         PIServo(LaggingArm()).follow(fine_move)
+
+
+class ServoArm:
+    """The simulator's low-level joint servo (no pybullet) behind the arm protocol."""
+
+    def __init__(self, bandwidth_hz: float, friction_deg: float = 1.5):
+        from suture_bt.sim.joint_servo import JointServo, ServoParams
+
+        params = ServoParams(bandwidth_hz=bandwidth_hz, revolute_friction_deg=friction_deg)
+        self.servo = JointServo(Q0, params)
+
+    def measured_jp(self):
+        return self.servo.q.copy()
+
+    def servo_jp(self, q):
+        self.servo.setpoint = np.asarray(q, dtype=float).copy()
+
+
+def _settled_error(
+    bandwidth_hz: float, gains: PIGains | None, enabled: bool = True, return_servo: bool = False
+):
+    """Mean |error| of the revolute joints at the end of 0.8 s holds after four ramps (rad)."""
+    arm = ServoArm(bandwidth_hz)
+    pi = PIServo(arm, gains=gains, enabled=enabled)
+    rng = np.random.default_rng(3)
+    q, errors, every = Q0.copy(), [], round(pi.dt / PHYSICS_DT)
+    for _ in range(4):
+        goal = q + rng.uniform(-0.3, 0.3, 6) * np.array([1, 1, 0.05, 1, 1, 1])
+        for k in range(round(1.6 / PHYSICS_DT)):
+            if k % every == 0:
+                s = min(1.0, k * PHYSICS_DT / 0.8)
+                pi.servo_jp(q + (goal - q) * (10 * s**3 - 15 * s**4 + 6 * s**5))
+                pi.update(k * PHYSICS_DT)
+            arm.servo.step(PHYSICS_DT)
+            if k * PHYSICS_DT > 1.5:
+                errors.append(np.abs(goal - arm.servo.q)[[0, 1, 3, 4, 5]])
+        q = goal
+    return pi if return_servo else float(np.mean(errors))
+
+
+@pytest.mark.parametrize("bandwidth_hz", [3.0, 12.0])
+def test_adaptive_loop_removes_the_error_on_slow_and_fast_plants_it_is_not_told(bandwidth_hz):
+    low = _settled_error(bandwidth_hz, None, enabled=False)
+    adaptive = _settled_error(bandwidth_hz, None)
+    assert np.rad2deg(low) > 1.0  # the low-level servo alone leaves ~1.5°
+    assert adaptive < 0.05 * low  # ≥ 95 % removed
+    if bandwidth_hz == 3.0:  # the fixed 6 Hz gains hunt on the slow plant
+        assert adaptive < 0.5 * _settled_error(bandwidth_hz, PIGains(adaptive=False))
+
+
+def test_plant_estimate_tells_slow_from_fast_plants_from_measured_joints_only():
+    estimates = {}
+    for bandwidth_hz in (3.0, 12.0):
+        pi = _settled_error(bandwidth_hz, None, return_servo=True)
+        estimates[bandwidth_hz] = pi.estimator.bandwidth[[0, 1, 3, 5]] / (2 * np.pi)
+    np.testing.assert_allclose(estimates[3.0], 3.0, rtol=0.25)
+    # Fast plants come out slower than they are (biased low: conservative gains), but faster.
+    assert np.all(estimates[12.0] > 1.2 * estimates[3.0])
