@@ -16,6 +16,7 @@ from suture_bt.skills.handover import Handover
 from suture_bt.skills.insert import Insert
 from suture_bt.skills.localize_needle import LocalizeNeedle
 from suture_bt.skills.pick_up import PickUp
+from suture_bt.skills.stand_by import StandBy
 
 #: Chooses the taker's arc angle when a handover starts (the belief is known only then).
 AngleRule = Callable[[TaskContext], float]
@@ -54,14 +55,21 @@ class HandOver(SkillBehaviour):
         taker: str,
         angle: AngleRule,
         pulling: bool = False,
+        next_pair: int | None = None,
         name: str | None = None,
     ):
         super().__init__(name or f"Hand over {giver.upper()} → {taker.upper()}")
         self.giver, self.taker, self.angle, self.pulling = giver, taker, angle, pulling
+        self.next_pair = next_pair
 
     def make_skill(self):
         return Handover(
-            self.context, self.giver, self.taker, self.angle(self.context), self.pulling
+            self.context,
+            self.giver,
+            self.taker,
+            self.angle(self.context),
+            self.pulling,
+            next_pair=self.next_pair,
         )
 
 
@@ -85,6 +93,17 @@ class ExtractNeedle(SkillBehaviour):
 
     def make_skill(self):
         return Extract(self.context, self.puller, self.inserter, self.pair)
+
+
+class StandByAtExit(SkillBehaviour):
+    """The pulling arm waits near a pair's exit while the other arm inserts."""
+
+    def __init__(self, arm: str, pair: int, name: str | None = None):
+        super().__init__(name or f"{arm.upper()} stands by at exit {pair}")
+        self.arm, self.pair = arm, pair
+
+    def make_skill(self):
+        return StandBy(self.context, self.arm, self.pair)
 
 
 class PickUpNeedle(SkillBehaviour):

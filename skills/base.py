@@ -37,6 +37,9 @@ class Skill:
     """Base class: subclasses implement :meth:`program` (a generator) and set ``name``."""
 
     name = "skill"
+    #: Arms whose motions this skill commands (None: any); an abandoned or failed program
+    #: holds only these, so a skill running beside another one leaves that one's arm alone.
+    arms: tuple[str, ...] | None = None
 
     def __init__(self, context):
         self.context = context
@@ -90,8 +93,9 @@ class Skill:
     def on_stop(self) -> None:
         """Called when a program is abandoned or ends: an unfinished motion is held where it is."""
         if self.status is not SkillStatus.SUCCESS:
-            for arm in self.context.arms.values():
-                arm.servo.stop_following()
+            for name, arm in self.context.arms.items():
+                if self.arms is None or name in self.arms:
+                    arm.servo.stop_following()
 
     def run(self, sub: Skill) -> Waiting:
         """Run another skill inside this one's program (its report is kept in ours)."""

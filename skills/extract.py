@@ -15,13 +15,11 @@ from suture_bt.planning import NeedleArcError, gripper_poses, plan_needle_arc
 from suture_bt.skills import checks
 from suture_bt.skills.base import Skill, SkillFailure, Waiting
 from suture_bt.skills.context import NeedleNotSeen, TaskContext
-from suture_bt.skills.grasps import backed_off, hand, tip_goal
+from suture_bt.skills.grasps import backed_off, pulling_hand, tip_goal
 from suture_bt.skills.insert import SWEEP
 from suture_bt.skills.localize_needle import LocalizeNeedle
 from suture_bt.skills.motion import FINE, follow_poses, jaw_to, move_to
 
-#: The puller holds the needle this far behind the tip (rad of arc).
-PULL_GRASP_OFFSET = np.deg2rad(15.0)
 #: Approach along the jaws, the inserter's back-off and the lift after extraction (m).
 APPROACH, BACK_OFF, LIFT = 0.008, 0.010, 0.012
 JAW_OPEN = 0.8
@@ -48,14 +46,14 @@ class Extract(Skill):
         except NeedleArcError as e:
             raise SkillFailure(f"{where}: {e.reason}") from None
         T_needle = ctx.predicted_needle()
-        T_hand = hand(ctx.needle, ctx.needle.tip_angle + PULL_GRASP_OFFSET, pulling=True)
-        goal = tip_goal(T_needle, T_hand)
+        goal = tip_goal(T_needle, pulling_hand(ctx.needle))
         self.say(f"{where}: {self.puller} takes the emerged tip")
-        yield from jaw_to(puller, JAW_OPEN)
+        puller.arm.jaw.move_jp(np.array([JAW_OPEN]))  # opens on the way
         try:
             yield from move_to(ctx.clock, puller, [backed_off(goal, APPROACH)], "approach the tip")
         except SkillFailure as e:
             raise SkillFailure(f"{where}: exit out of {self.puller}'s reach: {e.reason}") from None
+        yield from jaw_to(puller, JAW_OPEN)
         yield from move_to(ctx.clock, puller, [goal], "reach the tip", FINE, joint_ok=False)
         yield from jaw_to(puller, 0.0)
         self.check(f"needle in {self.puller}'s jaw", *checks.jaw_holds_wire(puller.jaw_angle()))

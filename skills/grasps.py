@@ -24,6 +24,8 @@ MIN_JAW_SEPARATION = np.deg2rad(35.0)
 INSERT_GRASP_MARGIN = np.deg2rad(4.0)
 #: Jaw clearance from the entry that the planner's grasp limit keeps (m).
 JAW_CLEARANCE = 0.0015
+#: The pulling arm takes an emerged needle this far behind its tip (rad of arc).
+PULL_GRASP_OFFSET = np.deg2rad(15.0)
 
 
 def hand(needle: NeedleModel, arc_angle: float, pulling: bool = False) -> np.ndarray:
@@ -34,6 +36,11 @@ def hand(needle: NeedleModel, arc_angle: float, pulling: bool = False) -> np.nda
     rows = [tangent, -radial] if pulling else [-tangent, radial]
     R = np.stack([*rows, [0.0, 0.0, -1.0]])  # rows: tip axes in the needle frame
     return make_transform(R, np.array([0.0, 0.0, -GRASP_DEPTH]) - R @ needle.point_at(a))
+
+
+def pulling_hand(needle: NeedleModel) -> np.ndarray:
+    """T_tip_needle of the arm that takes an emerged needle out past an exit."""
+    return hand(needle, needle.tip_angle + PULL_GRASP_OFFSET, pulling=True)
 
 
 def tip_goal(T_world_needle: np.ndarray, T_tip_needle: np.ndarray) -> np.ndarray:

@@ -12,17 +12,23 @@ from __future__ import annotations
 
 import numpy as np
 
+from suture_bt.kinematics import UnreachablePoseError, inverse_kinematics
+from suture_bt.planning import NeedleArcError, plan_needle_arc, to_base
+from suture_bt.planning.trajectory import JOINT_VEL
 from suture_bt.skills import checks, presentation
 from suture_bt.skills.base import Skill, SkillFailure, Waiting
 from suture_bt.skills.context import NeedleBelief, NeedleObservation, TaskContext
 from suture_bt.skills.grasps import backed_off, hand, held_arc_angle, tip_goal
+from suture_bt.skills.insert import LIFT, PRE_ARC
 from suture_bt.skills.localize_needle import LocalizeNeedle
-from suture_bt.skills.motion import FINE, feasible, jaw_to, move_to
+from suture_bt.skills.motion import FINE, feasible, jaw_to, move_to, together
 
 #: The taker comes in along its jaws from this far back (m); the giver backs off as far.
 APPROACH = 0.010
 #: Jaw opening for taking the needle (rad).
 JAW_OPEN = 0.8
+#: The taker waits this far back along its jaws while the giver presents (m).
+STANDBY = 0.020
 
 
 class Handover(Skill):
@@ -31,12 +37,38 @@ class Handover(Skill):
     name = "hand over"
 
     def __init__(
-        self, context: TaskContext, giver: str, taker: str, arc_angle: float, pulling: bool = False
+        self,
+        context: TaskContext,
+        giver: str,
+        taker: str,
+        arc_angle: float,
+        pulling: bool = False,
+        next_pair: int | None = None,
     ):
         super().__init__(context)
         self.giver, self.taker = giver, taker
         self.arc_angle = float(arc_angle)
         self.pulling = pulling
+        self.next_pair = next_pair
+
+    def _time_to_next(self, taker, T_giver: np.ndarray, T_hand: np.ndarray) -> float:
+        """Joint-space time (s) for the taker from this handover to the approach of the pair
+        it inserts next: of the presentations it can reach, the one with the least tool roll
+        and wrist travel to come is best (inf when that approach is unreachable)."""
+        ctx = self.context
+        try:
+            arc = plan_needle_arc(*ctx.phantom.pair(self.next_pair), ctx.needle)
+        except NeedleArcError:
+            return 0.0  # the insertion reports it; no preference here
+        T_lift = tip_goal(arc.approach_poses(PRE_ARC, LIFT)[0], T_hand)
+        goal = tip_goal(T_giver @ ctx.belief.T_tip_needle, T_hand)
+        base = taker.base_frame()
+        try:
+            q_grasp = inverse_kinematics(to_base(goal, base), taker.servo.setpoint_jp())
+            q_lift = inverse_kinematics(to_base(T_lift, base), q_grasp)
+        except UnreachablePoseError:
+            return float("inf")
+        return float(np.max(np.abs(q_lift - q_grasp) / JOINT_VEL))
 
     def program(self) -> Waiting:
         ctx = self.context
@@ -63,10 +95,18 @@ class Handover(Skill):
                 f"hand over: no pose where {self.giver} shows the needle and {self.taker} "
                 f"reaches it ({why[0] if why else 'no candidate'})"
             )
+        if self.next_pair is not None:
+            poses = sorted(poses, key=lambda T: self._time_to_next(taker, T, T_hand))
         self.say(f"{self.giver} presents the needle for {self.taker}")
-        yield from jaw_to(taker, JAW_OPEN)
-        for T in poses:
-            yield from move_to(ctx.clock, giver, [T], "present the needle")
+        taker.arm.jaw.move_jp(np.array([JAW_OPEN]))  # opens while the giver presents
+        for i, T in enumerate(poses):
+            present = move_to(ctx.clock, giver, [T], "present the needle")
+            wait_at = backed_off(tip_goal(T @ belief.T_tip_needle, T_hand), STANDBY)
+            if i == 0 and not feasible(taker, [wait_at]):
+                # The taker comes most of the way while the giver presents.
+                yield from together(present, move_to(ctx.clock, taker, [wait_at], "come closer"))
+            else:
+                yield from present
             try:
                 yield from self.run(LocalizeNeedle(ctx, self.giver, present=False))
             except SkillFailure as e:
@@ -87,6 +127,7 @@ class Handover(Skill):
             )
         self.say(f"{self.taker} takes the needle at {np.rad2deg(self.arc_angle):.0f}°")
         yield from move_to(ctx.clock, taker, [backed_off(goal, APPROACH)], "approach the needle")
+        yield from jaw_to(taker, JAW_OPEN)  # long open by now; waits only if it is not
         yield from move_to(ctx.clock, taker, [goal], "reach the grasp", FINE, joint_ok=False)
         yield from jaw_to(taker, 0.0)
         self.check(f"needle in {self.taker}'s jaw", *checks.jaw_holds_wire(taker.jaw_angle()))
@@ -95,15 +136,22 @@ class Handover(Skill):
         T_back = backed_off(giver.commanded_tip_world(), APPROACH)
         yield from move_to(ctx.clock, giver, [T_back], "back off")
         # The needle has not moved: re-anchor the estimate to the taker's gripper, then look
-        # again after the taker has moved it; it must be where that gripper put it.
+        # again now that the giver has let go and backed away. Had the taker missed it, the
+        # needle would have fallen or gone with the giver; a fresh estimate where the taker's
+        # gripper holds it confirms the grasp and re-estimates the in-hand transform. When this
+        # view does not answer, the taker presents the needle and the estimate must be where
+        # its gripper put it (the needle moved with the gripper).
         ctx.believe(_as_observation(ctx.belief, T_needle), self.taker)
         T_tip_taken = ctx.belief.T_tip_needle.copy()
-        yield from self.run(LocalizeNeedle(ctx, self.taker))
+        try:
+            yield from self.run(LocalizeNeedle(ctx, self.taker, present=False))
+            what = f"needle stayed in {self.taker}'s jaw when {self.giver} let go"
+        except SkillFailure as e:
+            self.report.setdefault("refusals", []).append(e.reason)
+            yield from self.run(LocalizeNeedle(ctx, self.taker))
+            what = "needle moved with " + self.taker
         predicted = taker.tip_world() @ T_tip_taken
-        self.check(
-            "needle moved with " + self.taker,
-            *checks.poses_agree(ctx.belief.T_world_needle, predicted),
-        )
+        self.check(what, *checks.poses_agree(ctx.belief.T_world_needle, predicted))
         self.say(
             f"{self.taker} holds the needle at "
             f"{np.rad2deg(held_arc_angle(ctx.needle, ctx.belief.T_tip_needle)):.0f}°"

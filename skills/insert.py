@@ -21,8 +21,8 @@ from suture_bt.skills.motion import FINE, follow_poses, move_to
 #: The sweep starts with the tip this far (arc length) before the entry, and the approach
 #: comes down to it along the entry normal from this height (m).
 PRE_ARC, LIFT = 0.006, 0.010
-#: Needle sweep limits (rad/s, rad/s²): the tip moves at up to 6 mm/s.
-SWEEP = {"angular_speed": 0.6, "angular_acc": 2.4}
+#: Needle sweep limits (rad/s, rad/s²): the tip moves at up to 10 mm/s.
+SWEEP = {"angular_speed": 1.0, "angular_acc": 5.0}
 #: Looks at the emerged tip before giving up.
 CONFIRM_LOOKS = 2
 

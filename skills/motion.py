@@ -30,11 +30,11 @@ class Speed:
 
 
 #: Moves in free space (presenting, approaching a hover pose).
-TRANSIT = Speed(0.10, 0.5, 1.5, 5.0)
+TRANSIT = Speed(0.15, 1.0, 2.0, 8.0)
 #: The last centimetre to a grasp or an entry (slower, more accurate).
-FINE = Speed(0.03, 0.2, 0.8, 3.0)
+FINE = Speed(0.05, 0.4, 1.2, 5.0)
 #: Hold still after a move before looking or closing the jaw (servo settles).
-SETTLE_S = 0.15
+SETTLE_S = 0.10
 #: The jaw has stopped when its measured angle changes less than this per tick (rad).
 JAW_STILL = 1e-4
 
@@ -111,3 +111,17 @@ def jaw_to(arm: ArmHandle, angle: float) -> Waiting:
         if not arm.arm.jaw.is_busy() and previous is not None and abs(now - previous) < JAW_STILL:
             return
         previous = now
+
+
+def together(*motions: Waiting) -> Waiting:
+    """Run waiting motions (e.g. one per arm) side by side, a step each per tick, until all
+    have ended; a failure in any of them ends all (the caller's skill holds the arms)."""
+    running = list(motions)
+    while running:
+        for m in list(running):
+            try:
+                next(m)
+            except StopIteration:
+                running.remove(m)
+        if running:
+            yield

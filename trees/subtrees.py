@@ -22,6 +22,7 @@ from suture_bt.behaviours.actions import (
     InsertNeedle,
     Localize,
     PickUpNeedle,
+    StandByAtExit,
     away_from_holder_and,
     grasp_for_pairs,
 )
@@ -53,7 +54,9 @@ def prepare(pairs: tuple[int, ...]) -> py_trees.behaviour.Behaviour:
                 name="PSM2 hands the needle to PSM1",
             ),
             Calibrate(INSERTER),
-            HandOver(PULLER, INSERTER, grasp, name="PSM1 hands it back"),
+            HandOver(
+                PULLER, INSERTER, grasp, next_pair=pairs[0], name="PSM1 hands it back"
+            ),
         ],
     )
     from_tissue = py_trees.composites.Sequence(
@@ -80,17 +83,36 @@ def pick_up_children(grasp) -> list[py_trees.behaviour.Behaviour]:
     return [PickUpNeedle(INSERTER, grasp)]
 
 
+def insert_while_standing_by(pair: int) -> py_trees.behaviour.Behaviour:
+    """PSM2 inserts while PSM1 comes to wait at the exit (optional: a PSM1 that cannot wait
+    there comes from where it is; the extraction checks its own reach)."""
+    return py_trees.composites.Parallel(
+        f"Insert pair {pair}, PSM1 waits",
+        policy=py_trees.common.ParallelPolicy.SuccessOnAll(synchronise=True),
+        children=[
+            InsertNeedle(INSERTER, pair),
+            py_trees.decorators.FailureIsSuccess(
+                "Waiting is optional", StandByAtExit(PULLER, pair)
+            ),
+        ],
+    )
+
+
 def throw(pair: int, later_pairs: tuple[int, ...]) -> py_trees.behaviour.Behaviour:
     """One throw through ``pair``; ``later_pairs`` decide the grasp PSM2 takes back."""
     steps = [
         NeedleLocalised(INSERTER, name="Needle in PSM2's hand?"),
-        InsertNeedle(INSERTER, pair),
+        insert_while_standing_by(pair),
         ExtractNeedle(PULLER, INSERTER, pair),
     ]
     if later_pairs:
         steps.append(
             HandOver(
-                PULLER, INSERTER, grasp_for_pairs(later_pairs), name=f"Hand back after pair {pair}"
+                PULLER,
+                INSERTER,
+                grasp_for_pairs(later_pairs),
+                next_pair=later_pairs[0],
+                name=f"Hand back after pair {pair}",
             )
         )
     seq = py_trees.composites.Sequence(f"Pair {pair} steps", memory=True, children=steps)
