@@ -15,7 +15,10 @@ from suture_bt.sim.quiet import import_pybullet_quietly  # noqa: E402
 import_pybullet_quietly()  # before the commands import the simulator
 
 from suture_bt.commands import data as data_command  # noqa: E402
+from suture_bt.commands import debug as debug_command  # noqa: E402
 from suture_bt.commands import eval as eval_command  # noqa: E402
+from suture_bt.commands import inspect as inspect_command  # noqa: E402
+from suture_bt.commands import replay as replay_command  # noqa: E402
 from suture_bt.commands import run as run_command  # noqa: E402
 from suture_bt.commands import scene as scene_command  # noqa: E402
 from suture_bt.commands import train as train_command  # noqa: E402
@@ -24,6 +27,9 @@ from suture_bt.commands import train as train_command  # noqa: E402
 COMMANDS = [
     scene_command,
     run_command,
+    debug_command,
+    replay_command,
+    inspect_command,
     data_command,
     train_command,
     eval_command,

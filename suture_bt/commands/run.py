@@ -1,8 +1,9 @@
 """``suture-bt run [TREE]``: the main job — a suture tree in the simulated SRC scene, headless.
 
 Prints a live progress line (throw, current behaviour, simulated time), then a table per
-throw scored from the world's records, and writes ``result.json`` and ``trajectory.csv`` to
-``--out`` (also when the run fails). Exit status 0 only when every throw passed.
+throw scored from the world's records, and writes ``result.json``, ``trajectory.csv`` and the
+rerun recording ``run.rrd`` (``--rerun``) to ``--out`` (also when the run fails). Exit status
+0 only when every throw passed.
 """
 
 from __future__ import annotations
@@ -30,6 +31,13 @@ def register(subparsers) -> None:
     )
     p.add_argument("--seed", type=int, metavar="N", help="scene seed (random offsets, noise)")
     p.add_argument("--out", metavar="DIR", default="out/run", help="where results go")
+    p.add_argument(
+        "--rerun",
+        choices=("save", "spawn", "off"),
+        default="save",
+        help="record the run to DIR/run.rrd (save, default), also stream it to a viewer "
+        "(spawn), or not (off)",
+    )
     p.add_argument(
         "--policy",
         choices=("stop", "continue"),
@@ -74,6 +82,7 @@ class Progress:
 
 def run(args) -> int:
     # Imported here: building the parser must not load pybullet, torch or the networks.
+    from suture_bt.runtime.recording import attach_recording
     from suture_bt.runtime.results import throw_table
     from suture_bt.runtime.session import RunOptions, Session
 
@@ -90,6 +99,7 @@ def run(args) -> int:
             f"suture-bt run {args.tree}{label}: scene "
             f"{args.scene or 'SRC Task 3 start'}, seed {session.scene.seed}"
         )
+        rrd = attach_recording(session, args.rerun, out / "run.rrd")
         progress = Progress()
         try:
             session.run(progress)
@@ -100,5 +110,8 @@ def run(args) -> int:
     finally:
         session.close()
     print(throw_table(result))
-    print(f"results: {out / 'result.json'}, {out / 'trajectory.csv'}")
+    files = [out / "result.json", out / "trajectory.csv"] + ([rrd] if rrd else [])
+    print("results: " + ", ".join(str(f) for f in files))
+    for warning in session.observer.warnings:
+        print(f"warning: {warning}", file=sys.stderr)
     return 0 if result["passed"] else 1
