@@ -22,7 +22,8 @@ import time
 from pathlib import Path
 from typing import Any
 
-from suture_bt.recording.rerun_sink import RerunSink
+from suture_bt.recording.scene_sink import SceneSink
+from suture_bt.recording.tree_sink import TreeSink
 from suture_bt.runtime.recording import attach_recording
 from suture_bt.runtime.session import RunOptions, Session
 
@@ -30,10 +31,12 @@ LIMIT = 0.25
 
 
 class _Timed:
-    """Wraps a sink's hooks to add up the wall time spent in them."""
+    """Wraps a sink's hooks to add up the wall time spent in them (shared by all wrapped)."""
 
-    def __init__(self, sink: RerunSink):
-        self.sink, self.seconds = sink, 0.0
+    seconds = 0.0
+
+    def __init__(self, sink: Any):
+        self.sink = sink
 
     def __getattr__(self, name: str) -> Any:
         hook = getattr(self.sink, name)
@@ -43,7 +46,7 @@ class _Timed:
             try:
                 return hook(*args)
             finally:
-                self.seconds += time.perf_counter() - t0
+                _Timed.seconds += time.perf_counter() - t0
 
         return timed
 
@@ -52,13 +55,13 @@ def one_run(tree: str, seed: int, mode: str, out: Path) -> dict[str, Any]:
     """One run; wall times, the sink's own time, the .rrd size and the result."""
     t0 = time.perf_counter()
     session = Session(RunOptions(tree=tree, seed=seed))
-    timed = None
+    _Timed.seconds = 0.0
     try:
         path = attach_recording(session, mode, out / "run.rrd", say=lambda _: None)
-        if path is not None:
-            sinks = session.observer.sinks
-            i = next(k for k, s in enumerate(sinks) if isinstance(s, RerunSink))
-            sinks[i] = timed = _Timed(sinks[i])  # type: ignore[assignment]
+        sinks = session.observer.sinks
+        for k, sink in enumerate(sinks):
+            if isinstance(sink, TreeSink | SceneSink):
+                sinks[k] = _Timed(sink)  # type: ignore[assignment]
         session.run()
         result = session.write(out)
     finally:
@@ -69,7 +72,7 @@ def one_run(tree: str, seed: int, mode: str, out: Path) -> dict[str, Any]:
         "wall_s": wall,
         "tick_wall_s": session.wall_time,
         "ticks": session.ticks,
-        "sink_s": timed.seconds if timed else 0.0,
+        "sink_s": _Timed.seconds,
         "rrd_mb": (out / "run.rrd").stat().st_size / 1e6 if path else 0.0,
         "warnings": session.observer.warnings,
     }

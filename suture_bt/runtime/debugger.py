@@ -228,7 +228,7 @@ class Debugger:
         if hit is not None and hit.reason.startswith("_was_interrupted"):
             self.say(f"paused at {where} (interrupted)")
         elif hit is not None:
-            self.say(f"stopped at {where}: {hit.reason}")
+            self.say(f"stopped after {where}: {hit.reason}")
             for c in hit.changes:
                 self.say(f"  {change_line(c)}")
             return

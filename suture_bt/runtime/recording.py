@@ -17,7 +17,8 @@ import numpy as np
 import rerun as rr
 
 from suture_bt.recording.blueprint import default_blueprint
-from suture_bt.recording.rerun_sink import RerunSink
+from suture_bt.recording.scene_sink import SceneSink
+from suture_bt.recording.tree_sink import Flush, TreeSink
 from suture_bt.recording.viewer import why_no_viewer
 from suture_bt.sim.ground_truth import GroundTruth
 
@@ -79,5 +80,7 @@ def attach_recording(
         if why is not None:
             say(f"rerun: cannot start a viewer here ({why}); saving to {path} only")
         rec.save(path, default_blueprint=blueprint)
-    session.observer.add(RerunSink(rec, truth=TruthFeed(session.world)))
+    session.observer.add(TreeSink(rec))
+    session.observer.add(SceneSink(rec, truth=TruthFeed(session.world)))
+    session.observer.add(Flush(rec))  # last: closes after the others flushed
     return path

@@ -1,27 +1,27 @@
-"""The observer's rerun sink: a run on the ``tick`` and ``sim_time`` timelines.
+"""The scene half of a recording: the world, the images and the plots, tick by tick.
 
-Entities: ``bt/nodes/<path>`` (a StateChange lane per node), ``bt/tree`` (the unicode tree
-when it changes), ``bt/log`` (skills starting and ending, every FAILURE with its reason,
-``node_path`` beside), ``bt/checks`` (the skills' confirmations), ``bt/blackboard`` (the
-activity stream), ``world/...`` (ports, arms from measured joints + Δq̂, the needle as
-estimated and as predicted, plans, cameras and the images perception used), ``camera/
-calibration/<arm>``, ``plots/...`` (tracking error, PI output), ``run/...`` (options, node
-table, result). Ground truth only under ``ground_truth/`` (true needle and arms, lateral error
-at each crossing, strain), from the ``truth`` feed the front door passes.
+Entities: ``world/phantom/ports/<port>`` (frame and 5 mm square), ``world/<arm>`` (links and
+tip frame from measured joints + Δq̂, what the system believes), ``world/needle/estimate``
+(each new estimate) and ``world/needle/predicted`` (moved with its holder),
+``world/plan/...`` (the insertion arc and circle, presentation poses), ``world/camera/<eye>``
+(frame, pinhole, and the images perception used with mask outline, keypoints and fitted
+arc), ``camera/calibration/<arm>`` (the calibration image and jaw keypoints), ``plots/...``
+(tracking error and PI output per joint). Ground truth, from the ``truth`` feed the front
+door passes, only under ``ground_truth/``: the true needle and arms, the lateral error at each
+port crossing, the strain at engaged ports, and a log of the crossings.
 """
 
 from __future__ import annotations
 
-import json
 from typing import Any
 
 import numpy as np
 import rerun as rr
-from py_trees.common import Status
 
 from suture_bt.calibration.jaw_keypoints import project_keypoints
 from suture_bt.recording import images, scene
-from suture_bt.runtime.observer import Sink, StatusChange, TickRecord, preorder
+from suture_bt.recording.tree_sink import set_time, skill_nodes
+from suture_bt.runtime.observer import Sink, TickRecord
 
 #: Joint units for plots: degrees for revolute joints, millimetres for the insertion.
 UNITS = np.array([180 / np.pi, 180 / np.pi, 1000.0, 180 / np.pi, 180 / np.pi, 180 / np.pi])
@@ -29,13 +29,6 @@ JOINT_NAMES = ["q1 °", "q2 °", "q3 mm", "q4 °", "q5 °", "q6 °"]
 #: The 3D scene (arms, needle, truth) is logged every this many ticks (5: 10 Hz at 50 Hz);
 #: the tree, the logs, the plots and the images every tick they change.
 SCENE_EVERY = 5
-LEVEL = {
-    "WRITE": rr.TextLogLevel.DEBUG,
-    "INITIALISED": rr.TextLogLevel.DEBUG,
-    "UNSET": rr.TextLogLevel.DEBUG,
-    "READ": rr.TextLogLevel.TRACE,
-    "ACCESSED": rr.TextLogLevel.TRACE,
-}
 
 
 class _Columns:
@@ -71,18 +64,13 @@ class _Columns:
             self._send(path)
 
 
-def _is_skill(node: Any) -> bool:
-    return getattr(node, "skill", None) is not None or hasattr(node, "make_skill")
-
-
-class RerunSink(Sink):
-    """Log every tick of a session to ``rec`` (see the module docstring)."""
+class SceneSink(Sink):
+    """Log the world of every tick to ``rec`` (see the module docstring)."""
 
     def __init__(
         self, rec: rr.RecordingStream, truth: Any = None, scene_every: int = SCENE_EVERY
     ):
         self.rec, self.truth, self.scene_every = rec, truth, max(1, int(scene_every))
-        self._tree_text = ""
         self._belief: Any = None
         self._stamp: float | None = None
         self._frame: Any = None
@@ -94,26 +82,7 @@ class RerunSink(Sink):
 
     # ---------------------------------------------------------------- start
     def start(self, session: Any) -> None:
-        rec, ctx, opts = self.rec, session.context, session.options
-        label = "ORACLE ABLATION (ground truth fed to the skills)" if opts.oracle else "vision"
-        info = {
-            "tree": opts.tree,
-            "scene": opts.scene or "embedded SRC scene, Task 3 start",
-            "seed": int(session.scene.seed),
-            "mode": label,
-            "policy": opts.policy,
-            "tick_dt": opts.tick_dt,
-        }
-        rec.log("run/info", rr.TextDocument(json.dumps(info, indent=1)), static=True)
-        nodes = []
-        for n in preorder(session.root):
-            parent = session.observer.paths.get(n.parent.id) if n.parent else None
-            nodes.append(
-                {"path": session.observer.paths[n.id], "name": n.name, "class": type(n).__name__}
-                | {"parent": parent, "skill": _is_skill(n)}
-            )
-        rec.log("run/nodes", rr.TextDocument(json.dumps(nodes)), static=True)
-        rec.log("run/tree", rr.TextDocument(session.tree_text()), static=True)
+        rec, ctx = self.rec, session.context
         scene.log_static_scene(rec, ctx.phantom, ctx.camera.model)
         scene.log_pinholes(rec, ctx.camera.model, images.IMAGE_SCALE)
         scene.log_styles(rec, list(ctx.arms), ctx.needle)
@@ -121,55 +90,9 @@ class RerunSink(Sink):
             for kind in ("tracking_error", "pi_output"):
                 rec.log(f"plots/{kind}/{arm}", rr.SeriesLines(names=JOINT_NAMES), static=True)
 
-    # ---------------------------------------------------------------- the tree
-    def _time(self, tick: int, sim_time: float) -> None:
-        self.rec.set_time("tick", sequence=int(tick))
-        self.rec.set_time("sim_time", duration=float(sim_time))
-
-    def status_changed(self, change: StatusChange) -> None:
-        self._time(change.tick, change.sim_time)
-        self.rec.log(f"bt/nodes/{change.path}", rr.StateChange(state=change.status.name))
-        node, why = change.node, change.feedback
-        level = None
-        if change.status == Status.FAILURE:
-            text = f"{node.name} FAILED" + (f": {why}" if why else "")
-            failed_badly = bool(why) or _is_skill(node) or node.parent is None
-            level = rr.TextLogLevel.ERROR if failed_badly else rr.TextLogLevel.DEBUG
-        elif _is_skill(node) and change.status == Status.RUNNING:
-            text, level = f"{node.name} started", rr.TextLogLevel.INFO
-        elif (_is_skill(node) or node.parent is None) and change.status == Status.SUCCESS:
-            text = f"{node.name} succeeded" + (f": {why}" if why else "")
-            level = rr.TextLogLevel.INFO
-        if level is not None:
-            self.rec.log(
-                "bt/log",
-                rr.TextLog(text, level=level),
-                rr.AnyValues(node_path=change.path, status=change.status.name),
-            )
-
     def tick(self, session: Any, record: TickRecord) -> None:
-        rec = self.rec
-        self._time(record.tick, record.sim_time)
-        text = session.tree_text()
-        if text != self._tree_text:
-            rec.log("bt/tree", rr.TextDocument(text))
-            self._tree_text = text
-        for item in record.activity:
-            kind = str(item.activity_type)
-            value = str(item.current_value)
-            value = value if len(value) <= 120 else value[:117] + "..."
-            rec.log(
-                "bt/blackboard",
-                rr.TextLog(
-                    f"{item.key} {kind} by {item.client_name}: {value}",
-                    level=LEVEL.get(kind, rr.TextLogLevel.WARN),
-                ),
-            )
-        skills = [
-            n
-            for i in record.visited
-            if (n := session.observer.nodes.get(i)) is not None and getattr(n, "skill", None)
-        ]
+        set_time(self.rec, record.tick, record.sim_time)
+        skills = skill_nodes(session, record)
         self._log_reports(session, skills)
         self._log_images(session, skills)
         with_scene = (record.tick - 1) % self.scene_every == 0
@@ -190,18 +113,6 @@ class RerunSink(Sink):
         needle = session.context.needle
         for node in skills:
             report = node.skill.report
-            for check in _checks(report):
-                if self._new(check):
-                    ok = bool(check.get("ok"))
-                    self.rec.log(
-                        "bt/checks",
-                        rr.TextLog(
-                            f"{node.name}: {check.get('check')}: "
-                            f"{'ok' if ok else 'FAILED'} -- {check.get('detail')}",
-                            level=rr.TextLogLevel.INFO if ok else rr.TextLogLevel.WARN,
-                        ),
-                        rr.AnyValues(node_path=session.observer.paths[node.id]),
-                    )
             arc = report.get("arc")
             if isinstance(arc, dict) and self._new(arc):
                 pair = getattr(node, "pair", "x")
@@ -295,34 +206,5 @@ class RerunSink(Sink):
         self._strained = set(strain)
 
     # ---------------------------------------------------------------- end
-    def error(self, session: Any, message: str) -> None:
-        self._time(session.ticks + 1, session.context.clock.now())
-        self.rec.log("bt/log", rr.TextLog(message, level=rr.TextLogLevel.CRITICAL))
-
-    def finish(self, session: Any, result: dict) -> None:
-        self._time(max(session.ticks, 1), session.context.clock.now())
-        self.rec.log("run/result", rr.TextDocument(json.dumps(_brief(result), indent=1)))
-        verdict = "PASSED" if result.get("passed") else "FAILED"
-        level = rr.TextLogLevel.INFO if result.get("passed") else rr.TextLogLevel.WARN
-        why = result.get("error") or result.get("tree_failure") or ""
-        text = f"run {verdict}: tree {result.get('tree_status')}" + (f" ({why})" if why else "")
-        self.rec.log("bt/log", rr.TextLog(text, level=level))
-
     def close(self, session: Any) -> None:
         self.columns.flush()
-        self.rec.flush()
-        self.rec.disconnect()
-
-
-def _checks(report: dict) -> list[dict]:
-    """A report's checks and those of its finished sub-skills (``steps``), in order."""
-    out = list(report.get("checks", []))
-    for step in report.get("steps", []):
-        out += _checks(step)
-    return out
-
-
-def _brief(result: dict) -> dict:
-    """The result without the bulky port frames."""
-    return {k: v for k, v in result.items() if k != "ports"}
-
