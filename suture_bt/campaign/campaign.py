@@ -38,17 +38,43 @@ class CampaignRun:
     indices_run: list[int] = field(default_factory=list)
 
 
-def write_atomic(path: Path, text: str) -> None:
+def write_atomic(path: Path, data: str | bytes) -> None:
     """Write a file so that a reader (or a killed campaign) never sees half of it."""
     tmp = path.with_name(path.name + ".tmp")
-    tmp.write_text(text)
+    if isinstance(data, bytes):
+        tmp.write_bytes(data)
+    else:
+        tmp.write_text(data)
     os.replace(tmp, path)
+
+
+def code_version() -> dict[str, Any]:
+    """The git commit of the code and the files changed since (a campaign records it: trials
+    are comparable only on the same code)."""
+    import subprocess
+
+    root = Path(__file__).resolve().parents[2]
+    try:
+        head = subprocess.run(
+            ["git", "rev-parse", "HEAD"], cwd=root, capture_output=True, text=True, timeout=10
+        ).stdout.strip()
+        dirty = subprocess.run(
+            ["git", "status", "--porcelain", "--untracked-files=no"],
+            cwd=root,
+            capture_output=True,
+            text=True,
+            timeout=10,
+        ).stdout.split("\n")
+    except (OSError, subprocess.SubprocessError):
+        return {"commit": None, "modified": []}
+    return {"commit": head or None, "modified": [ln[3:] for ln in dirty if ln.strip()]}
 
 
 def prepare(out: Path, config: CampaignConfig, trials: int) -> None:
     """Create ``out`` or check that it holds this campaign; record the configuration."""
     out.mkdir(parents=True, exist_ok=True)
     path = out / "campaign.json"
+    old: dict[str, Any] = {}
     if path.is_file():
         try:
             old = json.loads(path.read_text())
@@ -60,7 +86,13 @@ def prepare(out: Path, config: CampaignConfig, trials: int) -> None:
                 f"{old.get('fingerprint')} != {config.fingerprint}); use another --out"
             )
         trials = max(trials, int(old.get("trials", 0)))
-    doc = {"fingerprint": config.fingerprint, "trials": trials, "config": config.to_dict()}
+    doc = {
+        "fingerprint": config.fingerprint,
+        "trials": trials,
+        "config": config.to_dict(),
+        # One entry per invocation: a resumed campaign may have run on newer code.
+        "code": (old.get("code", []) if path.is_file() else []) + [code_version()],
+    }
     write_atomic(path, json.dumps(doc, indent=2, default=str) + "\n")
 
 

@@ -12,9 +12,10 @@ gives the same scene on any machine or backend:
 * the phantom pose, jittered within the arms' reach: a few mm, a few degrees about the
   vertical, at most ``tilt_deg`` of tilt (larger moves are known to fail);
 * the camera's noise and brightness (inside the perception training ranges);
-* the low-level servo's parameters, when ``servo = "drawn"`` (nominal by default: the PI
-  servo's feed-forward still assumes the nominal 6 Hz plant, see issue 16);
-* the fault profile, when the scene parser knows ``faults:``.
+* the low-level servo's bandwidth, damping, friction and load, per arm and joint, drawn by the
+  world from the scene seed over the ranges of ``fault_profiles.yaml`` (``servo = "drawn"``,
+  the default; ``"nominal"`` holds the SRC servo);
+* the fault profile (``none``, ``mild``, ``harsh``), through the scene's ``faults:`` section.
 """
 
 from __future__ import annotations
@@ -30,15 +31,20 @@ import numpy as np
 OFFSET_BOUND = (5.0, 5.0, 5.0)
 ARMS = ("psm1", "psm2")
 #: Independent random streams, one per aspect of a trial.
-STREAMS = {"offsets": 1, "needle": 2, "phantom": 3, "camera": 4, "servo": 5}
-#: Servo parameter ranges for ``servo = "drawn"`` (issue 16's "robot is not the model").
-SERVO_RANGES = {
-    "bandwidth_hz": (3.0, 12.0),
-    "damping_ratio": (0.7, 1.3),
-    "revolute_friction_deg": (0.5, 2.5),
-    "prismatic_friction_mm": (0.03, 0.2),
-    "gravity_load": (0.8, 1.2),
-}
+STREAMS = {"offsets": 1, "needle": 2, "phantom": 3, "camera": 4}
+#: The profile whose servo ranges a ``servo = "drawn"`` campaign uses under fault profile none.
+SERVO_PROFILE = "mild"
+
+
+def servo_ranges(profile: str = SERVO_PROFILE) -> dict[str, list[float]]:
+    """The servo ranges of a fault profile in ``fault_profiles.yaml`` (the one place where
+    the recovery issue's ranges live), e.g. ``{"bandwidth_hz": [3.0, 12.0], ...}``."""
+    from importlib import resources
+
+    import yaml
+
+    text = resources.files("suture_bt.sim").joinpath("fault_profiles.yaml").read_text()
+    return dict((yaml.safe_load(text).get(profile) or {}).get("servo") or {})
 
 
 @dataclass(frozen=True)
@@ -53,7 +59,7 @@ class Randomization:
     tilt_deg: float = 1.5
     noise_std: tuple[float, float] = (0.0, 3.0)
     brightness: tuple[float, float] = (0.8, 1.25)
-    servo: str = "nominal"  # "nominal" | "drawn"
+    servo: str = "drawn"  # "drawn" (per run, arm and joint, by the world) | "nominal"
 
     def __post_init__(self) -> None:
         """Reject ranges a trial could not be built from."""
@@ -80,6 +86,7 @@ class CampaignConfig:
     oracle: bool = False
     policy: str = "stop"
     max_sim_time: float = 300.0
+    rerun: str = "off"  # "save": each trial keeps its rerun recording (run.rrd)
     randomization: Randomization = field(default_factory=Randomization)
 
     def to_dict(self) -> dict[str, Any]:
@@ -147,12 +154,20 @@ def draw(config: CampaignConfig, index: int) -> dict[str, Any]:
         "noise_std": _r(g.uniform(*rz.noise_std), 3),
         "brightness": _r(g.uniform(*rz.brightness), 3),
     }
-    if rz.servo == "drawn":
-        g = _rng(seed, "servo")
-        out["servo"] = {k: _r(g.uniform(lo, hi), 4) for k, (lo, hi) in SERVO_RANGES.items()}
-    if config.faults != "none":
-        out["faults"] = config.faults
+    faults = _faults(config.faults, rz.servo)
+    if faults is not None:
+        out["faults"] = faults
     return out
+
+
+def _faults(profile: str, servo: str) -> str | dict[str, Any] | None:
+    """The trial's ``faults:`` section: the profile, with the servo drawn from the ranges (the
+    world draws them per arm and joint from the scene seed) or held nominal."""
+    if servo == "drawn":
+        if profile == "none":
+            return {"profile": "none", "servo": servo_ranges()}
+        return profile  # mild and harsh draw the servo from their own ranges
+    return None if profile == "none" else {"profile": profile, "servo": None}
 
 
 def merge(base: dict[str, Any], override: dict[str, Any]) -> dict[str, Any]:

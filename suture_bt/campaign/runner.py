@@ -54,6 +54,7 @@ def trial_specs(config: CampaignConfig, trials: int) -> list[dict[str, Any]]:
             "oracle": config.oracle,
             "policy": config.policy,
             "max_sim_time": config.max_sim_time,
+            "rerun": config.rerun,
         }
         for i in range(trials)
     ]

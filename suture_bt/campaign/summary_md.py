@@ -4,7 +4,7 @@ from __future__ import annotations
 
 from typing import Any
 
-from suture_bt.campaign.randomize import SERVO_RANGES
+from suture_bt.campaign.randomize import SERVO_PROFILE, servo_ranges
 from suture_bt.campaign.stats import rate_text
 
 #: What the figures are compared with (DESIGN.md §1 and §5).
@@ -40,13 +40,14 @@ def _randomization(config: dict[str, Any]) -> list[str]:
         if rest
         else " (jaw-only: resting starts are not yet reliable in the tree)"
     )
-    servo = (
-        "nominal (drawing is available with --servo drawn; the PI servo still assumes the "
-        "nominal 6 Hz plant, issue 16)"
-        if rz["servo"] == "nominal"
-        else "drawn per trial: "
-        + ", ".join(f"{k} {lo:g}-{hi:g}" for k, (lo, hi) in SERVO_RANGES.items())
-    )
+    faults = config["faults"]
+    if rz["servo"] == "nominal":
+        servo = "nominal (the SRC servo: 6 Hz, 1.5° / 0.1 mm friction)"
+    else:
+        ranges = servo_ranges(SERVO_PROFILE if faults == "none" else faults)
+        servo = "drawn per trial, arm and joint (never told to the controller): " + ", ".join(
+            f"{k} {lo:g}-{hi:g}" for k, (lo, hi) in ranges.items()
+        )
     return [
         "- joint offsets of both arms: uniform over the full SRC bounds (±5°, ±5°, ±5 mm)",
         f"- needle start: {start}",
@@ -55,7 +56,7 @@ def _randomization(config: dict[str, Any]) -> list[str]:
         f"- camera: noise σ {rz['noise_std'][0]:g}-{rz['noise_std'][1]:g} grey levels, "
         f"brightness ×{rz['brightness'][0]:g}-{rz['brightness'][1]:g}",
         f"- low-level servo: {servo}",
-        f"- fault profile: {config['faults']}",
+        f"- fault profile: {faults}",
     ]
 
 

@@ -2,7 +2,8 @@
 
 Runs wherever the backend puts it (a local child process or a Ray worker) and returns a plain
 payload, never writing to the campaign directory itself, so both backends record trials the
-same way: ``{"status": "ok", "files": {name: text}, "extras": {...}}``.
+same way: ``{"status": "ok", "files": {name: text or bytes}, "extras": {...}}`` (``run.rrd``,
+with ``rerun = "save"``, is bytes).
 
 Per-tick bookkeeping (:class:`TrialMonitor`, front door: ground truth only through
 :class:`~suture_bt.sim.ground_truth.GroundTruth`):
@@ -29,7 +30,7 @@ import numpy as np
 import yaml
 
 #: Trial spec keys (built by :func:`suture_bt.campaign.runner.trial_specs`).
-SPEC_KEYS = ("index", "seed", "scene", "tree", "oracle", "policy", "max_sim_time")
+SPEC_KEYS = ("index", "seed", "scene", "tree", "oracle", "policy", "max_sim_time", "rerun")
 
 
 def single_thread() -> None:
@@ -168,18 +169,26 @@ def run_trial(spec: dict[str, Any]) -> dict[str, Any]:
         max_sim_time=float(spec["max_sim_time"]),
     )
     session = Session(options, scene)
-    try:
-        monitor = TrialMonitor(session)
+    with tempfile.TemporaryDirectory() as tmp:
         try:
-            session.run(monitor)
-        except KeyboardInterrupt:
-            session.error = "interrupted"
-        with tempfile.TemporaryDirectory() as tmp:
+            if spec.get("rerun", "off") == "save":
+                from suture_bt.runtime.recording import attach_recording
+
+                attach_recording(session, "save", Path(tmp) / "run.rrd", say=lambda _: None)
+            monitor = TrialMonitor(session)
+            try:
+                session.run(monitor)
+            except KeyboardInterrupt:
+                session.error = "interrupted"
             session.write(Path(tmp))
-            files = {n: (Path(tmp) / n).read_text() for n in ("result.json", "trajectory.csv")}
-        extras = monitor.extras()
-    finally:
-        session.close()
+            extras = monitor.extras()
+        finally:
+            session.close()  # also closes the recording's sinks
+        files: dict[str, str | bytes] = {
+            n: (Path(tmp) / n).read_text() for n in ("result.json", "trajectory.csv")
+        }
+        if (Path(tmp) / "run.rrd").is_file():
+            files["run.rrd"] = (Path(tmp) / "run.rrd").read_bytes()
     files["scene.yaml"] = scene_yaml(spec["scene"])
     extras["trial_wall_s"] = round(time.perf_counter() - t0, 3)
     return {"status": "ok", "files": files, "extras": extras}

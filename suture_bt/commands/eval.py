@@ -95,6 +95,10 @@ def _config(args):
         raise ValueError(f"unknown fault profile {args.faults!r}; choose none, mild or harsh")
     if args.faults != "none" and not faults_supported():
         raise ValueError("fault profiles not available yet")
+    if args.servo == "drawn" and not faults_supported():
+        raise ValueError(
+            "servo drawing not available yet (no faults: section); use --servo nominal"
+        )
     return CampaignConfig(
         seed=args.seed,
         tree=args.tree,
@@ -103,6 +107,7 @@ def _config(args):
         faults=args.faults,
         oracle=args.oracle,
         policy=args.policy,
+        rerun=args.rerun,
         randomization=Randomization(resting_fraction=args.resting_fraction, servo=args.servo),
     )
 
