@@ -61,9 +61,16 @@ def register(subparsers) -> None:
     )
     p.add_argument(
         "--servo",
-        choices=("nominal", "drawn"),
-        default="nominal",
-        help="low-level servo parameters: nominal, or drawn per trial from ranges",
+        choices=("drawn", "nominal"),
+        default="drawn",
+        help="low-level servo: drawn per trial, arm and joint from the fault profile's ranges "
+        "(default), or the nominal SRC servo",
+    )
+    p.add_argument(
+        "--rerun",
+        choices=("off", "save"),
+        default="off",
+        help="keep each trial's rerun recording as trials/NNNN/run.rrd (save)",
     )
     p.add_argument(
         "--retry-errors",
