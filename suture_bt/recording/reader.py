@@ -138,5 +138,5 @@ def read_run(path: str | Path) -> RunRecording:
             log = run.logs.setdefault(entity, [])
             log += [Entry(k, t, x, lv or "", p or "") for k, t, x, lv, p in rows]
     for entries in (*run.lanes.values(), *run.logs.values(), run.trees):
-        entries.sort(key=lambda e: (e.tick if e.tick is not None else -1))
+        entries.sort(key=lambda e: e.tick if e.tick is not None else -1)
     return run

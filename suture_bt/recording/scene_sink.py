@@ -67,9 +67,7 @@ class _Columns:
 class SceneSink(Sink):
     """Log the world of every tick to ``rec`` (see the module docstring)."""
 
-    def __init__(
-        self, rec: rr.RecordingStream, truth: Any = None, scene_every: int = SCENE_EVERY
-    ):
+    def __init__(self, rec: rr.RecordingStream, truth: Any = None, scene_every: int = SCENE_EVERY):
         self.rec, self.truth, self.scene_every = rec, truth, max(1, int(scene_every))
         self._belief: Any = None
         self._stamp: float | None = None

@@ -203,8 +203,7 @@ class TreeObserver:
         nodes = list(preorder(self.root))
         for test in (
             lambda n: n.name.lower() == key,
-            lambda n: self.paths[n.id].lower().endswith(safe_part(key).lower())
-            and "/" in key,
+            lambda n: self.paths[n.id].lower().endswith(safe_part(key).lower()) and "/" in key,
             lambda n: key in n.name.lower(),
         ):
             found = [n for n in nodes if test(n)]
