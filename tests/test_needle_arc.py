@@ -148,3 +148,16 @@ def test_approach_poses_come_down_the_entry_normal_to_the_tip_before_the_entry()
     )
     with pytest.raises(ValueError):
         arc.pre_insertion_angle(-1.0)
+
+
+@pytest.mark.parametrize("shift", [(0.0, 0.0, -0.02), (0.0, -0.03, -0.02), (0.004, 0.011, 0.007)])
+@pytest.mark.parametrize("pair", [1, 2, 3, 4])
+def test_the_plan_moves_with_the_phantom(pair, shift):
+    # The two circles of a symmetric pair sweep the same angle up to float noise; which one is
+    # planned must not depend on where the phantom stands (it once flipped at z -20 mm).
+    here = plan_needle_arc(*PhantomModel().pair(pair))
+    moved = plan_needle_arc(*PhantomModel(pose_to_transform(shift, (0.0, 0.0, 0.0))).pair(pair))
+    expected = here.T_world_needle_entry.copy()
+    expected[:3, 3] += shift
+    np.testing.assert_allclose(moved.T_world_needle_entry, expected, atol=1e-9)
+    assert moved.overshoot_angle == pytest.approx(here.overshoot_angle, abs=1e-9)

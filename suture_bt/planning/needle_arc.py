@@ -220,7 +220,8 @@ def _candidates(entry: Port, exit_: Port, r: float):
                 and np.dot(mid - px, nx) < 0
             )
             if inside:
-                out.append((angle, centre, w))
+                depth = min(-float(np.dot(mid - pe, ne)), -float(np.dot(mid - px, nx)))
+                out.append((angle, centre, w, depth))
     return out
 
 
@@ -246,7 +247,41 @@ def plan_needle_arc(
             f"no circle of radius {1e3 * r:.2f} mm through {entry.name} and {exit.name} "
             "enters against the entry normal and leaves along the exit normal"
         )
-    port_angle, centre, w = min(cands, key=lambda c: c[0])
+    # Shortest sweep first; a tie (the two circles of a symmetric pair sweep the same angle,
+    # equal to float noise) goes to the deeper bite, not to whichever rounding came out lower.
+    # The first circle on which the whole throw works is the plan.
+    failures = []
+    for port_angle, centre, w, _ in sorted(cands, key=lambda c: (round(c[0], 6), -c[3])):
+        try:
+            return _arc_on(
+                entry,
+                exit,
+                needle,
+                port_angle,
+                centre,
+                w,
+                min_tip_out,
+                margin,
+                extraction_clearance,
+            )
+        except NeedleArcError as e:
+            failures.append(e)
+    raise failures[0]
+
+
+def _arc_on(
+    entry: Port,
+    exit: Port,  # noqa: A002 - the port's role
+    needle: NeedleModel,
+    port_angle: float,
+    centre: np.ndarray,
+    w: np.ndarray,
+    min_tip_out: float,
+    margin: float,
+    extraction_clearance: float,
+) -> NeedleArc:
+    """The throw on one candidate circle, or NeedleArcError saying why it does not work."""
+    r = needle.radius
     z = -w  # the tip moves about the needle's −z
     ue = (entry.position - centre) / r
     th = needle.tip_angle
