@@ -189,3 +189,26 @@ def test_fault_profiles_and_servo_draws_go_into_the_scenes_faults_section(tmp_pa
     assert scene_from_dict(trial_scene_dict(nominal, 0)).faults.servo is None
     plain = CampaignConfig(randomization=Randomization(servo="nominal"))
     assert "faults" not in trial_scene_dict(plain, 0)
+
+
+def test_the_eval_command_parses_every_option_and_reports_without_running(tmp_path, capsys):
+    from suture_bt.cli import build_parser, main
+    from suture_bt.commands import eval as eval_command
+
+    argv = ["eval", "--trials", "3", "--workers", "1", "--seed", "4", "--policy", "continue"]
+    argv += ["--time-budget", "30", "--resting-fraction", "0.5", "--servo", "nominal"]
+    argv += ["--rerun", "save", "--tree", "single_throw", "--out", str(tmp_path)]
+    config = eval_command._config(build_parser().parse_args(argv))
+    assert (config.seed, config.tree, config.policy, config.rerun) == (
+        4,
+        "single_throw",
+        "continue",
+        "save",
+    )
+    assert config.randomization.resting_fraction == 0.5 and config.randomization.servo == "nominal"
+    assert main(["eval", "--trials", "1", "--tree", "nope", "--out", str(tmp_path)]) == 1
+    assert "unknown tree 'nope'" in capsys.readouterr().err
+    run_campaign(CampaignConfig(), 3, tmp_path, trial_fn=_fake({1: "fail"}))
+    assert main(["eval", "--trials", "3", "--report-only", "--out", str(tmp_path)]) == 0
+    out = capsys.readouterr().out
+    assert "3 trials: runs passed 2/3" in out and (tmp_path / "summary.md").is_file()
