@@ -120,31 +120,26 @@ def _config(args):
 
 
 class Progress:
-    """A tqdm bar over the trials with the pass rate so far."""
+    """A tqdm bar over the trials with the pass rate so far (finished trials included)."""
 
     def __init__(self, total: int, done: int, passed: int, errors: int):
         from tqdm import tqdm
 
-        self.passed, self.errors, self.seen = passed, errors, done
+        self.base = (done, passed, errors)
         self.bar = tqdm(
             total=total, initial=done, unit="trial", file=sys.stderr, dynamic_ncols=True
         )
-        self._postfix()
+        self._postfix(done, passed, errors)
 
-    def _postfix(self) -> None:
-        rate = f"{100 * self.passed / self.seen:.0f}%" if self.seen else "-"
-        self.bar.set_postfix_str(f"passed {self.passed}/{self.seen} ({rate}), errors {self.errors}")
+    def _postfix(self, seen: int, passed: int, errors: int) -> None:
+        rate = f"{100 * passed / seen:.0f}%" if seen else "-"
+        self.bar.set_postfix_str(f"passed {passed}/{seen} ({rate}), errors {errors}")
 
     def __call__(self, doc, tally) -> None:
-        self.seen += 1
-        self.passed = self._base_passed + tally.passed
-        self.errors = self._base_errors + tally.errors
+        """After each recorded trial (``run_campaign``'s ``on_record``)."""
+        done, passed, errors = self.base
         self.bar.update(1)
-        self._postfix()
-
-    def start(self) -> Progress:
-        self._base_passed, self._base_errors = self.passed, self.errors
-        return self
+        self._postfix(done + tally.ran, passed + tally.passed, errors + tally.errors)
 
     def close(self) -> None:
         self.bar.close()
@@ -160,16 +155,17 @@ def run(args) -> int:
     out = Path(args.out)
     if not args.report_only:
         before = load_trials(out, args.trials) if (out / "trials").is_dir() else []
-        ok = [d for d in before if d["status"] == "ok"]
-        progress = Progress(
-            args.trials,
-            len(before) if not args.retry_errors else len(ok),
-            sum(bool(d["result"] and d["result"].get("passed")) for d in ok),
-            0 if args.retry_errors else len(before) - len(ok),
-        ).start()
-        signal.signal(signal.SIGTERM, signal.default_int_handler)  # kill = Ctrl-C: clean up
+        if args.retry_errors:
+            before = [d for d in before if d["status"] == "ok"]
         label = f"Ray ({args.ray})" if args.ray else f"{args.workers or default_workers()} workers"
         print(f"suture-bt eval: {args.trials} trials on {label} -> {out}", file=sys.stderr)
+        progress = Progress(
+            args.trials,
+            len(before),
+            sum(bool(d["result"] and d["result"].get("passed")) for d in before),
+            sum(d["status"] != "ok" for d in before),
+        )
+        signal.signal(signal.SIGTERM, signal.default_int_handler)  # kill = Ctrl-C: clean up
         try:
             tally = run_campaign(
                 config,
