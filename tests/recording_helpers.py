@@ -1,5 +1,6 @@
 """One recorded single-throw run per test process, shared by the debugger, recording and
-inspect tests (a whole run costs tens of seconds: it is made once, on first use)."""
+inspect tests (a whole run costs tens of seconds: it is made once, on first use), and a
+scripted tree in a fake session for the fast tests."""
 
 from __future__ import annotations
 
@@ -9,8 +10,13 @@ import json
 import shutil
 import tempfile
 from pathlib import Path
+from types import SimpleNamespace
+
+import py_trees
+from py_trees.common import Status
 
 from suture_bt.cli import main
+from suture_bt.runtime.observer import TreeObserver
 
 #: The seed of the shared run (the debugger test repeats it under the debugger).
 SEED = 0
@@ -32,3 +38,59 @@ def result_without_wall_time(path: Path) -> dict:
     result = json.loads(path.read_text())
     result.pop("wall_time_s")
     return result
+
+
+class Scripted(py_trees.behaviour.Behaviour):
+    """Returns ``statuses`` one per tick (then the last again); a FAILURE says ``reason``."""
+
+    def __init__(self, name, statuses, reason=""):
+        super().__init__(name)
+        self.statuses, self.reason = list(statuses), reason
+
+    def update(self):
+        status = self.statuses.pop(0) if len(self.statuses) > 1 else self.statuses[0]
+        self.feedback_message = self.reason if status == Status.FAILURE else "working"
+        return status
+
+
+class FakeSession:
+    """The parts of a Session the debugger and the tree sink use, over scripted behaviours."""
+
+    def __init__(self, root):
+        self.root, self.ticks, self.error, self.now = root, 0, None, 0.0
+        self.context = SimpleNamespace(clock=SimpleNamespace(now=lambda: self.now))
+        self.options = SimpleNamespace(
+            tree="scripted", scene=None, oracle=False, policy="stop", tick_dt=0.02
+        )
+        self.scene = SimpleNamespace(seed=7)
+        self.tree = py_trees.trees.BehaviourTree(root)
+        self.tree.setup()
+        self.observer = TreeObserver(self.tree, self.context.clock, self)
+
+    @property
+    def finished(self):
+        return self.root.status in (Status.SUCCESS, Status.FAILURE)
+
+    def tick(self):
+        self.tree.tick()
+        self.now += 0.02
+        self.ticks += 1
+
+    def current(self):
+        tip = self.root.tip()
+        return tip.name if tip else ""
+
+    def tree_text(self):
+        return py_trees.display.unicode_tree(self.root, show_status=True)
+
+
+def fake_session() -> FakeSession:
+    """Root sequence: Approach (RUNNING, SUCCESS), then Insert pair 1 (RUNNING ×2, FAILURE
+    "jaw empty"): the tree fails at tick 4."""
+    R, S, F = Status.RUNNING, Status.SUCCESS, Status.FAILURE
+    root = py_trees.composites.Sequence(
+        "Root",
+        memory=True,
+        children=[Scripted("Approach", [R, S]), Scripted("Insert pair 1", [R, R, F], "jaw empty")],
+    )
+    return FakeSession(root)

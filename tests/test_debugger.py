@@ -7,67 +7,14 @@ import shutil
 import subprocess
 import sys
 import time
-from types import SimpleNamespace
 
-import py_trees
 import pytest
 from py_trees.common import Status
-from recording_helpers import SEED, TREE, recorded_run, result_without_wall_time
+from recording_helpers import SEED, TREE, fake_session, recorded_run, result_without_wall_time
 
 from suture_bt.cli import main
 from suture_bt.runtime.debugger import CommandError, Debugger, parse, parse_script
-from suture_bt.runtime.observer import Sink, TreeObserver
-
-
-# ---------------------------------------------------------------------- a scripted tree
-class Scripted(py_trees.behaviour.Behaviour):
-    """Returns ``statuses`` one per tick (then the last again); a FAILURE says ``reason``."""
-
-    def __init__(self, name, statuses, reason=""):
-        super().__init__(name)
-        self.statuses, self.reason = list(statuses), reason
-
-    def update(self):
-        status = self.statuses.pop(0) if len(self.statuses) > 1 else self.statuses[0]
-        self.feedback_message = self.reason if status == Status.FAILURE else "working"
-        return status
-
-
-class FakeSession:
-    """The parts of a Session the debugger uses, over a tree of scripted behaviours."""
-
-    def __init__(self, root):
-        self.root, self.ticks, self.error, self.now = root, 0, None, 0.0
-        self.context = SimpleNamespace(clock=SimpleNamespace(now=lambda: self.now))
-        self.tree = py_trees.trees.BehaviourTree(root)
-        self.tree.setup()
-        self.observer = TreeObserver(self.tree, self.context.clock, self)
-
-    @property
-    def finished(self):
-        return self.root.status in (Status.SUCCESS, Status.FAILURE)
-
-    def tick(self):
-        self.tree.tick()
-        self.now += 0.02
-        self.ticks += 1
-
-    def current(self):
-        tip = self.root.tip()
-        return tip.name if tip else ""
-
-    def tree_text(self):
-        return py_trees.display.unicode_tree(self.root, show_status=True)
-
-
-def _fake():
-    R, S, F = Status.RUNNING, Status.SUCCESS, Status.FAILURE
-    root = py_trees.composites.Sequence(
-        "Root",
-        memory=True,
-        children=[Scripted("Approach", [R, S]), Scripted("Insert pair 1", [R, R, F], "jaw empty")],
-    )
-    return FakeSession(root)
+from suture_bt.runtime.observer import Sink
 
 
 def _debugger(session):
@@ -97,7 +44,7 @@ def test_parse_commands_aliases_and_errors():
 
 
 def test_breakpoints_stepping_until_fail_and_the_end():
-    session = _fake()
+    session = fake_session()
     dbg, out, ended = _debugger(session)
     dbg.run_script(parse_script(["break insert pair 1", "continue", "node Insert"], "t"))
     text = out.getvalue()
@@ -107,7 +54,7 @@ def test_breakpoints_stepping_until_fail_and_the_end():
     assert ended == [2]  # the script ended (EOF = quit) before the run
     assert session.error.startswith("stopped in the debugger at tick 2")
 
-    session = _fake()
+    session = fake_session()
     dbg, out, ended = _debugger(session)
     dbg.execute(parse("until-fail"))
     text = out.getvalue()
@@ -122,7 +69,7 @@ def test_breakpoints_stepping_until_fail_and_the_end():
 
 
 def test_step_prints_transitions_and_unknown_nodes_are_refused():
-    session = _fake()
+    session = fake_session()
     dbg, out, _ = _debugger(session)
     dbg.execute(parse("step 2"))
     assert "tick 2 (0.02 s) Approach: RUNNING → SUCCESS -- working" in out.getvalue()
@@ -148,7 +95,7 @@ def test_observer_fans_out_to_sinks_and_drops_a_broken_one():
         def tick(self, session, record):
             raise RuntimeError("disk full")
 
-    session = _fake()
+    session = fake_session()
     good = session.observer.add(Count())
     session.observer.add(Broken())
     while not session.finished:
@@ -216,7 +163,7 @@ def test_debug_bad_input(tmp_path, capsys):
 def test_debugged_single_throw_equals_the_undebugged_run(tmp_path, capsys):
     reference = recorded_run()
     cmds = tmp_path / "cmds.txt"
-    cmds.write_text("break Insert pair 1\nstep\ntree\nbb\ncontinue\nworld\nquit\n")
+    cmds.write_text("break Insert pair 1\ncontinue\nstep\ntree\nbb\nworld\ncontinue\nquit\n")
     out = tmp_path / "debug"
     code = main(["debug", TREE, "--seed", str(SEED), "--commands", str(cmds), "--out", str(out)])
     text = capsys.readouterr().out

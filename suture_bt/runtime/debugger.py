@@ -110,12 +110,13 @@ class _Since(Sink):
 
 
 class Debugger:
-    """Commands over one session; ``on_end()`` is called once when the run ends or on quit."""
+    """Commands over one session, printed to ``out`` (default stdout); ``on_end()`` is called
+    once, when the run ends or on quit."""
 
     def __init__(
         self,
         session: Any,
-        out: TextIO = sys.stdout,
+        out: TextIO | None = None,
         on_end: Callable[[], None] | None = None,
         truth: Any = None,
     ):
@@ -128,8 +129,9 @@ class Debugger:
 
     # ---------------------------------------------------------------- i/o
     def say(self, text: str) -> None:
-        self.out.write(text.rstrip("\n") + "\n")
-        self.out.flush()
+        out = self.out or sys.stdout  # looked up now: stdout may have been replaced
+        out.write(text.rstrip("\n") + "\n")
+        out.flush()
 
     def prompt(self) -> str:
         s = self.session
