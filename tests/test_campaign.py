@@ -154,7 +154,8 @@ def test_the_report_counts_passes_errors_and_reasons_with_wilson_intervals(tmp_p
     assert s["runs_src_trajectory"]["k"] == 7 and s["scorer_disagreements"] == []
     assert s["throws"]["n"] == 9  # the errored trial has no throws
     assert s["failures"]["trial error: raised RuntimeError: fake trial # raised"] == 1
-    assert s["failures"]["no exit crossing of exit# after entry#"] == 2
+    assert s["failures"]["throw failed: no exit crossing of exit# after entry#"] == 2
+    assert s["throw_failures"] == {"no exit crossing of exit# after entry#": 2}
     md = (tmp_path / "summary.md").read_text()
     assert "7/10 (70 %, CI 40-89 %)" in md and "Anchors" in md and "0.3 mm / 1.1°" in md
     for png in ("errors.png", "time_per_throw.png", "recoveries.png", "pass_by_offset.png"):

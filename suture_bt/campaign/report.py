@@ -49,12 +49,38 @@ def _throw_row(trial: dict[str, Any], t: dict[str, Any]) -> dict[str, Any]:
         "src_entry_lateral_mm": src.get("entry_lateral_mm"),
         "src_exit_lateral_mm": src.get("exit_lateral_mm"),
         "src_tip_out_mm": src.get("tip_out_mm"),
+        "src_failure": src.get("failure"),
+        "src_crossing_t": [src.get("entry_t"), src.get("exit_t")],
         "strain_mm": t.get("strain_mm"),
         "stab_mm": t.get("stab_mm"),
         "sim_time_s": t.get("sim_time_s"),
         "wall_time_s": extras.get("throw_wall_s", {}).get(str(t["pair"])),
         "failure": t.get("failure"),
     }
+
+
+def _disagreement(trial: dict[str, Any], t: dict[str, Any]) -> str:
+    """One line on a throw the two scorers judge differently."""
+    world = "passed" if t["passed"] else f"failed ({t['failure']})"
+    src = "passed" if t["src_passed"] else f"failed ({t['src_failure']})"
+    t0, t1 = t["src_crossing_t"]
+    when = "" if t0 is None else f", scored crossings at t = {t0:.2f}-{t1 or t0:.2f} s"
+    return f"trial {trial['index']} pair {t['pair']}: world {world}; trajectory {src}{when}"
+
+
+def _run_failure(row: dict[str, Any]) -> str:
+    """Why a run failed, numbers as ``#``: its error, where the tree stopped, or its first
+    failed throw."""
+    if row["status"] != "ok":
+        return "trial error: " + reason_key(row["error"])
+    if row.get("run_error"):
+        return "run error: " + reason_key(row["run_error"])
+    failed = [t for t in row["throws"] if not t["passed"] and t["attempted"]]
+    if failed:
+        return f"throw failed: {reason_key(failed[0]['failure'])}"
+    if row.get("tree_failure"):
+        return "tree stopped: " + reason_key(row["tree_failure"])
+    return "failed (no reason recorded)"
 
 
 def _only_stab(failure: str | None) -> bool:
@@ -89,6 +115,7 @@ def trial_row(trial: dict[str, Any]) -> dict[str, Any]:
         "passed": bool(result["passed"]),
         "src_passed": src.get("passed"),
         "src_order_ok": src.get("order_ok"),
+        "src_sequence": src.get("sequence"),
         "oracle": bool(result.get("oracle")),
         "sim_time_s": result.get("sim_time_s"),
         "run_wall_s": result.get("wall_time_s"),
@@ -119,12 +146,13 @@ def summarise(rows: list[dict[str, Any]], config: dict[str, Any]) -> dict[str, A
                 cal[j].append(abs(err[j]))
     locs = [x for r in ok for x in r.get("task1", [])]
     failures: Counter[str] = Counter()
+    throw_failures: Counter[str] = Counter()
     for r in rows:
-        if r["status"] != "ok":
-            failures["trial error: " + reason_key(r["error"])] += 1
+        if not r["passed"]:
+            failures[_run_failure(r)] += 1
         for t in r["throws"]:
-            if not t["passed"]:
-                failures[reason_key(t["failure"])] += 1
+            if t["attempted"] and not t["passed"]:
+                throw_failures[reason_key(t["failure"])] += 1
     recoveries: Counter[str] = Counter()
     for r in ok:
         recoveries.update(r.get("recoveries", {}))
@@ -162,10 +190,12 @@ def summarise(rows: list[dict[str, Any]], config: dict[str, Any]) -> dict[str, A
             for p in pairs
         },
         "scorer_disagreements": [
-            f"trial {r['index']} pair {t['pair']}"
+            _disagreement(r, t) for r in ok for t in r["throws"] if not t["agree"]
+        ],
+        "order_failures": [
+            f"trial {r['index']}: {', '.join(r.get('src_sequence') or []) or 'no crossings'}"
             for r in ok
-            for t in r["throws"]
-            if not t["agree"]
+            if r.get("src_order_ok") is False and r["passed"]
         ],
         "lateral_mm": spread(lat),
         "entry_lateral_mm": spread(t["entry_lateral_mm"] for t in throws),
@@ -189,6 +219,7 @@ def summarise(rows: list[dict[str, Any]], config: dict[str, Any]) -> dict[str, A
         "recoveries": dict(recoveries.most_common()),
         "recovery_nodes_in_tree": max((r.get("recovery_nodes") or 0 for r in ok), default=0),
         "failures": dict(failures.most_common()),
+        "throw_failures": dict(throw_failures.most_common()),
         "by_offset": by_offset,
         "config": config,
     }

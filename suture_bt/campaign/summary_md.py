@@ -131,12 +131,23 @@ def summary_markdown(s: dict[str, Any], plots: list[str]) -> str:
         lines.append("The tree has no recovery branches (RecoveryNode) yet: nothing to count.")
     lines += ["", "## Failures by reason", ""]
     if s["failures"]:
-        lines += ["| reason (numbers as #) | count |", "|---|---|"]
+        lines += ["| failed runs: first reason (numbers as #) | runs |", "|---|---|"]
         lines += [f"| {k.replace('|', '/')} | {v} |" for k, v in s["failures"].items()]
     else:
-        lines.append("None.")
-    if s["scorer_disagreements"]:
-        lines += ["", "Scorer disagreements: " + ", ".join(s["scorer_disagreements"])]
+        lines.append("No run failed.")
+    if s["throw_failures"]:
+        lines += ["", "| attempted throws that failed: reason | throws |", "|---|---|"]
+        lines += [f"| {k.replace('|', '/')} | {v} |" for k, v in s["throw_failures"].items()]
+    if s["scorer_disagreements"] or s["order_failures"]:
+        lines += ["", "## Where the trajectory scorer and the world disagree", ""]
+        lines += [
+            "The world scores each throw inside its own time window; the trajectory scorer sees "
+            "the whole run, so a port crossed outside the throws (e.g. while the needle is "
+            "carried during preparation) counts against it, as the SRC rules would.",
+            "",
+        ]
+        lines += [f"- {d}" for d in s["scorer_disagreements"]]
+        lines += [f"- crossing order of {d}" for d in s["order_failures"]]
     lines += ["", "## Pass rate by joint-offset magnitude", ""]
     lines += ["| largest Δq_j / bound | runs | throws |", "|---|---|---|"]
     for b in s["by_offset"]:
