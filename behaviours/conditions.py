@@ -11,6 +11,7 @@ from py_trees.common import Status
 
 from suture_bt.behaviours.skill_behaviour import needs
 from suture_bt.skills.checks import jaw_holds_wire
+from suture_bt.skills.reach import pair_reach
 
 
 class _Condition(py_trees.behaviour.Behaviour):
@@ -70,3 +71,19 @@ class ArmCalibrated(_Condition):
     def ask(self) -> tuple[bool, str]:
         ok = self.context.arm(self.arm).calibrated
         return ok, "calibrated" if ok else "not calibrated"
+
+
+class PairsInReach(_Condition):
+    """Both arms can reach every planned pose of the throws through ``pairs`` (IK, no motion)."""
+
+    def __init__(self, pairs: tuple[int, ...], inserter: str, puller: str, name: str | None = None):
+        super().__init__(name or "Pairs in reach?")
+        self.pairs, self.inserter, self.puller = tuple(pairs), inserter, puller
+
+    def ask(self) -> tuple[bool, str]:
+        for pair in self.pairs:
+            why = pair_reach(self.context, pair, self.inserter, self.puller)
+            if why:
+                return False, why
+        return True, f"pairs {', '.join(map(str, self.pairs))} in reach of both arms"
+

@@ -42,6 +42,19 @@ def poses_agree(T_seen: np.ndarray, T_predicted: np.ndarray) -> tuple[bool, str]
     return ok, f"seen {dp * 1e3:.1f} mm / {da:.1f}° from where the gripper put it"
 
 
+def stayed_in_place(T_seen: np.ndarray, T_before: np.ndarray) -> tuple[bool, str]:
+    """The needle is still where it was (same centre, same plane), e.g. after a handover.
+
+    The turn within its own plane is left free: the earlier estimate was made with the other
+    jaw over part of the arc, where an end's place along the circle is least certain.
+    """
+    dp = float(np.linalg.norm(T_seen[:3, 3] - T_before[:3, 3]))
+    cos = float(np.clip(abs(T_seen[:3, 2] @ T_before[:3, 2]), -1.0, 1.0))
+    tilt = float(np.rad2deg(np.arccos(cos)))
+    ok = dp <= AGREE_POSITION and tilt <= AGREE_ANGLE_DEG
+    return ok, f"seen {dp * 1e3:.1f} mm away, its plane turned {tilt:.1f}°"
+
+
 def tip_out_past_exit(
     T_world_needle: np.ndarray, needle: NeedleModel, exit_port: Port
 ) -> tuple[bool, str, dict]:

@@ -20,8 +20,9 @@ GRASP_DEPTH = 0.0015
 END_MARGIN = np.deg2rad(8.0)
 #: Smallest arc angle (rad) between two jaws holding the needle at once.
 MIN_JAW_SEPARATION = np.deg2rad(35.0)
-#: Extra arc beyond the planner's grasp limit for the inserting grasp (rad).
-INSERT_GRASP_MARGIN = np.deg2rad(4.0)
+#: Extra arc beyond the planner's grasp limit for the inserting grasp (rad): covers the
+#: in-plane error (up to about 12°) of an estimate made with another jaw near the tip.
+INSERT_GRASP_MARGIN = np.deg2rad(12.0)
 #: Jaw clearance from the entry that the planner's grasp limit keeps (m).
 JAW_CLEARANCE = 0.0015
 #: The pulling arm takes an emerged needle this far behind its tip (rad of arc).

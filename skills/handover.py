@@ -20,6 +20,7 @@ from suture_bt.skills.base import Skill, SkillFailure, Waiting
 from suture_bt.skills.context import NeedleBelief, NeedleObservation, TaskContext
 from suture_bt.skills.grasps import backed_off, hand, held_arc_angle, tip_goal
 from suture_bt.skills.insert import LIFT, PRE_ARC
+from suture_bt.skills.line_of_sight import clear_tip_pose
 from suture_bt.skills.localize_needle import LocalizeNeedle
 from suture_bt.skills.motion import FINE, feasible, jaw_to, move_to, together
 
@@ -99,10 +100,17 @@ class Handover(Skill):
             poses = sorted(poses, key=lambda T: self._time_to_next(taker, T, T_hand))
         self.say(f"{self.giver} presents the needle for {self.taker}")
         taker.arm.jaw.move_jp(np.array([JAW_OPEN]))  # opens while the giver presents
-        for i, T in enumerate(poses):
+        for T in poses:
             present = move_to(ctx.clock, giver, [T], "present the needle")
-            wait_at = backed_off(tip_goal(T @ belief.T_tip_needle, T_hand), STANDBY)
-            if i == 0 and not feasible(taker, [wait_at]):
+            # The taker waits a little back along its jaws, out of the cameras' sight.
+            T_needle_there = T @ belief.T_tip_needle
+            rcm, centre = taker.base_frame()[:3, 3], T_needle_there[:3, 3]
+            wait_at = backed_off(tip_goal(T_needle_there, T_hand), STANDBY)
+            cleared = clear_tip_pose(ctx, wait_at, rcm, centre)
+            wait_at = wait_at if cleared is None else cleared
+            if feasible(taker, [wait_at]):  # stays, but not in the way
+                wait_at = clear_tip_pose(ctx, taker.commanded_tip_world(), rcm, centre)
+            if wait_at is not None and not feasible(taker, [wait_at]):
                 # The taker comes most of the way while the giver presents.
                 yield from together(present, move_to(ctx.clock, taker, [wait_at], "come closer"))
             else:
@@ -145,13 +153,18 @@ class Handover(Skill):
         T_tip_taken = ctx.belief.T_tip_needle.copy()
         try:
             yield from self.run(LocalizeNeedle(ctx, self.taker, present=False))
-            what = f"needle stayed in {self.taker}'s jaw when {self.giver} let go"
+            self.check(
+                f"needle stayed in {self.taker}'s jaw when {self.giver} let go",
+                *checks.stayed_in_place(ctx.belief.T_world_needle, T_needle),
+            )
         except SkillFailure as e:
             self.report.setdefault("refusals", []).append(e.reason)
             yield from self.run(LocalizeNeedle(ctx, self.taker))
-            what = "needle moved with " + self.taker
-        predicted = taker.tip_world() @ T_tip_taken
-        self.check(what, *checks.poses_agree(ctx.belief.T_world_needle, predicted))
+            predicted = taker.tip_world() @ T_tip_taken
+            self.check(
+                "needle moved with " + self.taker,
+                *checks.poses_agree(ctx.belief.T_world_needle, predicted),
+            )
         self.say(
             f"{self.taker} holds the needle at "
             f"{np.rad2deg(held_arc_angle(ctx.needle, ctx.belief.T_tip_needle)):.0f}°"

@@ -12,16 +12,20 @@ from __future__ import annotations
 
 import numpy as np
 
+from suture_bt.calibration.calibration_pose import offset_box_points
+from suture_bt.kinematics import forward_kinematics
 from suture_bt.perception.in_hand import estimate_in_hand
 from suture_bt.skills import presentation
 from suture_bt.skills.base import Skill, SkillFailure, Waiting
 from suture_bt.skills.context import NeedleNotSeen, NeedleObservation, TaskContext
-from suture_bt.skills.motion import move_to
+from suture_bt.skills.line_of_sight import clear_tip_pose
+from suture_bt.skills.motion import feasible, move_to, together
 
-#: A held needle's wire must pass this close to the holder's pinch point (m): the jaw grips
-#: the wire; the margin covers the tip-pose error of an arm that is not yet calibrated.
+#: A held needle's wire must pass this close to the holder's pinch point (m) once the arm is
+#: calibrated; before, the margin adds the tip displacement of the largest hidden joint
+#: offset the task allows (SRC: 5°, 5°, 5 mm) at the arm's present joints.
 HOLD_TOLERANCE_CALIBRATED = 0.002
-HOLD_TOLERANCE_UNCALIBRATED = 0.012
+HOLD_MARGIN_UNCALIBRATED = 0.004
 #: Presentation poses tried before giving up.
 MAX_PRESENTATIONS = 3
 
@@ -39,13 +43,13 @@ class LocalizeNeedle(Skill):
     def program(self) -> Waiting:
         ctx = self.context
         reasons: list[str] = []
-        if self.holder is None or not self.present:
+        if self.holder is None or not self.present:  # look from where it is
             obs = self._look(reasons)
-            if obs is not None:
-                self._adopt(obs)
-                return
-            if self.holder is None:
-                raise SkillFailure(f"needle not localised: {'; '.join(reasons)}")
+            if obs is None:
+                where = f"held by {self.holder} " if self.holder else ""
+                raise SkillFailure(f"needle {where}not localised: {'; '.join(reasons)}")
+            self._adopt(obs)
+            return
         arm = ctx.arm(self.holder)
         poses, why = presentation.choose(ctx, arm)
         if not poses:
@@ -53,12 +57,32 @@ class LocalizeNeedle(Skill):
         self.report["presentation_poses"] = [T.tolist() for T in poses]
         for i, T in enumerate(poses[:MAX_PRESENTATIONS]):
             self.say(f"presenting the needle held by {arm.name} ({i + 1}/{len(poses)})")
-            yield from move_to(ctx.clock, arm, [T], "present the needle")
+            present = move_to(ctx.clock, arm, [T], "present the needle")
+            yield from together(present, *self._make_way(self._target(T)))
             obs = self._look(reasons)
             if obs is not None:
                 self._adopt(obs)
                 return
         raise SkillFailure(f"needle held by {arm.name} not localised: {'; '.join(reasons)}")
+
+    def _target(self, T_present: np.ndarray) -> np.ndarray:
+        """Where the needle will be seen: its centre at this presentation (or the pinch)."""
+        b = self.context.belief
+        if b is not None and b.holder == self.holder and b.T_tip_needle is not None:
+            return (T_present @ b.T_tip_needle)[:3, 3]
+        return T_present[:3, 3]
+
+    def _make_way(self, target: np.ndarray) -> list[Waiting]:
+        """Moves that take the other arms out of the cameras' sight of ``target``."""
+        ctx = self.context
+        moves = []
+        for name, other in ctx.arms.items():
+            if name == self.holder:
+                continue
+            T = clear_tip_pose(ctx, other.commanded_tip_world(), other.base_frame()[:3, 3], target)
+            if T is not None and not feasible(other, [T]):
+                moves.append(move_to(ctx.clock, other, [T], "make way for the cameras"))
+        return moves
 
     def _look(self, reasons: list[str]) -> NeedleObservation | None:
         ctx = self.context
@@ -71,7 +95,9 @@ class LocalizeNeedle(Skill):
             return None
         if self.holder is not None:
             arm = ctx.arm(self.holder)
-            tol = HOLD_TOLERANCE_CALIBRATED if arm.calibrated else HOLD_TOLERANCE_UNCALIBRATED
+            tol = HOLD_TOLERANCE_CALIBRATED
+            if not arm.calibrated:
+                tol = HOLD_MARGIN_UNCALIBRATED + worst_offset_displacement(arm.servo.estimated_jp())
             tip = arm.tip_world()
             grip = estimate_in_hand(
                 obs.T_world_needle,
@@ -107,3 +133,17 @@ class LocalizeNeedle(Skill):
             f"needle {where} at {np.round(1e3 * belief.T_world_needle[:3, 3], 1)} mm "
             f"(spread {obs.angle_std_deg:.2f}°)"
         )
+
+
+def worst_offset_displacement(q: np.ndarray) -> float:
+    """Largest tip displacement (m) a hidden offset within the task's bound can cause at
+    joints ``q`` (the corners of the bound box; the tip moves monotonically between them)."""
+    q = np.asarray(q, dtype=float)
+    tip = forward_kinematics(q)[:3, 3]
+    worst = 0.0
+    for dq in offset_box_points(2):
+        q2 = q.copy()
+        q2[:3] += dq
+        worst = max(worst, float(np.linalg.norm(forward_kinematics(q2)[:3, 3] - tip)))
+    return worst
+

@@ -78,6 +78,28 @@ def test_30deg_off_disagrees(T_seen):
     assert "30.0°" in detail
 
 
+# ------------------------------------------------------------------ stayed_in_place
+def test_a_turn_within_the_needle_plane_still_counts_as_staying(T_seen):
+    T = T_seen.copy()
+    T[:3, :3] = T[:3, :3] @ rpy_to_matrix((0.0, 0.0, np.deg2rad(15.0)))  # about needle z
+    ok, detail = checks.stayed_in_place(T, T_seen)
+    assert ok is True and "plane turned 0.0°" in detail
+
+
+def test_a_needle_moved_5mm_did_not_stay(T_seen):
+    T = T_seen.copy()
+    T[:3, 3] += np.array([0.0, 0.0, -0.005])  # fell
+    ok, detail = checks.stayed_in_place(T, T_seen)
+    assert ok is False and "5.0 mm away" in detail
+
+
+def test_a_needle_whose_plane_tipped_did_not_stay(T_seen):
+    T = T_seen.copy()
+    T[:3, :3] = T[:3, :3] @ rpy_to_matrix((np.deg2rad(25.0), 0.0, 0.0))
+    ok, detail = checks.stayed_in_place(T, T_seen)
+    assert ok is False and "turned 25.0°" in detail
+
+
 # ------------------------------------------------------------------ tip_out_past_exit
 @pytest.mark.parametrize("phantom", sorted(PHANTOMS))
 @pytest.mark.parametrize("pair", [1, 2, 3, 4])

@@ -1,7 +1,8 @@
 """Real trees in the real simulation, scored from the world's records (ground truth).
 
 Few and lean (each is a whole run with 1080p rendering): the full suture under SRC condition
-C, one throw on a moved and rotated phantom, and a run that must end cleanly in FAILURE.
+C, one throw on a moved and rotated phantom, one from a needle resting on the tissue, and a
+run that must end cleanly in FAILURE.
 """
 
 import json
@@ -74,11 +75,28 @@ def test_a_phantom_out_of_reach_ends_the_run_with_its_reason_and_writes_results(
     result, session = _run(RunOptions(tree="single_throw", max_sim_time=60.0), scene, tmp_path)
     assert not result["passed"]
     (throw,) = result["throws"]
-    # Far below the arms the tissue is no longer behind the calibration pose either: the run
-    # ends at the first step that cannot be done, with that step's reason.
+    # The reach check ends the run before anything moves, with the pair, port and arm.
     assert not throw["passed"] and "not attempted: the run ended at" in throw["failure"], throw
-    assert result["tree_failure"] and "psm" in result["tree_failure"].lower()
-    assert (tmp_path / "result.json").exists() and (tmp_path / "trajectory.csv").exists()
+    assert "pair 1: entry out of PSM2's reach at entry1" in result["tree_failure"]
+    assert result["sim_time_s"] < 0.1
+    assert json.loads((tmp_path / "result.json").read_text())["tree_failure"]
+    assert (tmp_path / "trajectory.csv").exists()
+
+
+@pytest.mark.slow
+def test_single_throw_from_a_needle_resting_on_the_tissue_picks_it_up_and_passes():
+    scene = scene_from_dict(
+        {
+            # Resting in view on the tissue top, turned a little; both arms under condition B.
+            "needle": {"start": "pose", "position": [-0.022, 0.030, 0.0755], "rpy": [0, 0, 0.4]},
+            "arms": {"psm1": {"joint_offset": "B"}, "psm2": {"joint_offset": "B"}},
+        }
+    )
+    result, session = _run(RunOptions(tree="single_throw"), scene)
+    (throw,) = result["throws"]
+    assert throw["passed"], throw
+    ran = [r["behaviour"] for r in session.context.reports]
+    assert "Pick up the needle with PSM2" in ran and not any("hands" in b for b in ran)
 
 
 def test_run_scene_defaults_to_the_task3_start_and_takes_the_seed():

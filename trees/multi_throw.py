@@ -9,7 +9,7 @@ from __future__ import annotations
 import py_trees
 
 from suture_bt.behaviours.report import SutureReport
-from suture_bt.trees.subtrees import prepare, throw
+from suture_bt.trees.subtrees import in_reach, prepare, throw
 
 PAIRS = (1, 2, 3, 4)
 
@@ -27,10 +27,13 @@ def create_tree(
         if policy == "continue":
             node = py_trees.decorators.FailureIsSuccess(f"Go on after throw {pair}", node)
         throws.append(node)
+    # Stopping at the first failed throw: a pair out of reach ends the run before anything
+    # moves. Going on: each throw checks its own pair.
+    first = [in_reach(pairs)] if policy == "stop" else []
     return py_trees.composites.Sequence(
         "Suture (SRC Task 3)",
         memory=True,
-        children=[prepare(pairs), *throws, SutureReport(pairs)],
+        children=[*first, prepare(pairs), *throws, SutureReport(pairs)],
     )
 
 

@@ -5,7 +5,7 @@ from __future__ import annotations
 import py_trees
 
 from suture_bt.behaviours.report import SutureReport
-from suture_bt.trees.subtrees import prepare, throw
+from suture_bt.trees.subtrees import in_reach, prepare, throw
 
 
 def create_tree(pair: int = 1, policy: str = "stop") -> py_trees.behaviour.Behaviour:
@@ -14,7 +14,7 @@ def create_tree(pair: int = 1, policy: str = "stop") -> py_trees.behaviour.Behav
     return py_trees.composites.Sequence(
         f"Single throw (pair {pair})",
         memory=True,
-        children=[prepare((pair,)), throw(pair, ()), SutureReport((pair,))],
+        children=[in_reach((pair,)), prepare((pair,)), throw(pair, ()), SutureReport((pair,))],
     )
 
 

@@ -26,7 +26,7 @@ from suture_bt.behaviours.actions import (
     away_from_holder_and,
     grasp_for_pairs,
 )
-from suture_bt.behaviours.conditions import NeedleLocalised
+from suture_bt.behaviours.conditions import NeedleLocalised, PairsInReach
 from suture_bt.behaviours.needle_start import NeedleStart
 from suture_bt.behaviours.sim_timeout import SimTimeout
 from suture_bt.behaviours.throw_scope import ThrowScope
@@ -78,6 +78,12 @@ def prepare(pairs: tuple[int, ...]) -> py_trees.behaviour.Behaviour:
     return SimTimeout("Prepare (time limit)", seq, PREPARE_LIMIT)
 
 
+def in_reach(pairs: tuple[int, ...]) -> py_trees.behaviour.Behaviour:
+    """Both arms can reach the planned poses of the throws through ``pairs``."""
+    label = f"pair {pairs[0]}" if len(pairs) == 1 else "pairs"
+    return PairsInReach(pairs, INSERTER, PULLER, name=f"All of {label} in reach?")
+
+
 def pick_up_children(grasp) -> list[py_trees.behaviour.Behaviour]:
     """Localise the resting needle and pick it up with PSM2 at the throws' grasp."""
     return [PickUpNeedle(INSERTER, grasp)]
@@ -101,6 +107,7 @@ def insert_while_standing_by(pair: int) -> py_trees.behaviour.Behaviour:
 def throw(pair: int, later_pairs: tuple[int, ...]) -> py_trees.behaviour.Behaviour:
     """One throw through ``pair``; ``later_pairs`` decide the grasp PSM2 takes back."""
     steps = [
+        in_reach((pair,)),
         NeedleLocalised(INSERTER, name="Needle in PSM2's hand?"),
         insert_while_standing_by(pair),
         ExtractNeedle(PULLER, INSERTER, pair),
