@@ -57,7 +57,7 @@ def _node_lines(rec) -> list[str]:
         span = f"ticks {running[0]}..{lane[-1].tick}" if running else f"tick {lane[-1].tick}"
         fails = sum(1 for e in lane if e.text == "FAILURE")
         extra = f", {fails} failure(s)" if fails else ""
-        lines.append(f"  {label:58s} {lane[-1].text:8s} {len(lane):3d} changes, {span}{extra}")
+        lines.append(f"  {label:58s} {lane[-1].text:8s} {len(lane):3d} change(s), {span}{extra}")
     return lines
 
 

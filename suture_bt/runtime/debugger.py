@@ -9,6 +9,7 @@ tick runs, never what it does: the same seed gives the same run, paused or not.
 
 from __future__ import annotations
 
+import re
 import signal
 import sys
 from collections.abc import Callable, Iterable
@@ -61,10 +62,11 @@ class Command:
 
 
 def parse(line: str) -> Command | None:
-    """The command on ``line`` (None for a blank or comment line); raises CommandError."""
-    text = line.split("#", 1)[0].strip() if not line.lstrip().startswith("break") else line
-    text = text.strip()
-    if not text or text.startswith("#"):
+    """The command on ``line`` (None for a blank or comment line); raises CommandError.
+
+    ``#`` at the start of a line or after a space starts a comment."""
+    text = re.split(r"(?:^|\s)#", line, maxsplit=1)[0].strip()
+    if not text:
         return None
     word, _, rest = text.partition(" ")
     name, rest = ALIASES.get(word.lower(), word.lower()), rest.strip()
