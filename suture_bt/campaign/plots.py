@@ -42,8 +42,8 @@ def write_plots(out: Path, rows: list[dict[str, Any]], summary: dict[str, Any]) 
     fig, axes = plt.subplots(2, 2, figsize=(10, 7))
     _hist(axes[0, 0], _values(ok, "entry_lateral_mm"), "entry lateral error", "mm", 2.5)
     _hist(axes[0, 1], _values(ok, "exit_lateral_mm"), "exit lateral error", "mm", 2.5)
-    locs = [x["task1_score_mm"] for r in ok for x in r.get("task1", [])]
-    _hist(axes[1, 0], locs, "Task 1 score per localisation (base+mid+tip)", "mm")
+    locs = [x["task1_score_mm"] for r in ok for x in r.get("task1", []) if x.get("adopted")]
+    _hist(axes[1, 0], locs, "Task 1 score of adopted localisations (base+mid+tip)", "mm")
     cal = [abs(e[j]) for r in ok for e in r["calibration_error"].values() for j in (0, 1)]
     _hist(axes[1, 1], cal, "calibration |error|, joints 1-2", "deg")
     fig.tight_layout()

@@ -20,7 +20,7 @@ from suture_bt.campaign.randomize import offset_magnitude
 from suture_bt.campaign.stats import rate, reason_key, spread
 
 #: Normalised offset-magnitude bins (largest |Δq_j| / bound over both arms) for the plot.
-OFFSET_BINS = (0.0, 0.5, 0.75, 0.9, 1.0)
+OFFSET_BINS = (0.0, 0.7, 0.85, 0.95, 1.0)
 
 
 @dataclass
@@ -119,6 +119,7 @@ def trial_row(trial: dict[str, Any]) -> dict[str, Any]:
         "oracle": bool(result.get("oracle")),
         "sim_time_s": result.get("sim_time_s"),
         "run_wall_s": result.get("wall_time_s"),
+        "trial_cpu_s": extras.get("trial_cpu_s"),
         "tree_failure": result.get("tree_failure"),
         "run_error": result.get("error"),
         "calibration_error": result.get("calibration_error", {}),
@@ -209,6 +210,7 @@ def summarise(rows: list[dict[str, Any]], config: dict[str, Any]) -> dict[str, A
         "run_sim_time_s": spread(r["sim_time_s"] for r in ok),
         "run_wall_time_s": spread(r["run_wall_s"] for r in ok),
         "trial_wall_s_total": round(sum(r["trial_wall_s"] or 0.0 for r in rows), 1),
+        "trial_cpu_s": spread(r.get("trial_cpu_s") for r in ok),
         "calibration_abs_error": {
             name: spread(cal[j]) for j, name in enumerate(("q1_deg", "q2_deg", "q3_mm"))
         },

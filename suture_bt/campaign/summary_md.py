@@ -108,6 +108,7 @@ def summary_markdown(s: dict[str, Any], plots: list[str]) -> str:
         f"| simulated time per run, s | {_sp(s['run_sim_time_s'], 1)} |",
         f"| wall time per run (tick loop), s | {_sp(s['run_wall_time_s'], 1)} |",
         f"| trial wall time, summed over trials, s | {s['trial_wall_s_total']:.0f} |",
+        f"| CPU time per trial (≈ wall on an idle core), s | {_sp(s['trial_cpu_s'], 1)} |",
     ]
     for name, sp in s["calibration_abs_error"].items():
         lines.append(f"| calibration abs. error {name.replace('_', ', ')} | {_sp(sp, 3)} |")
