@@ -2,7 +2,8 @@
 
 From the planned circle of the pair it knows where the tip will stand at the end of the
 insertion, so it can come most of the way in advance: to the pulling grasp on that planned
-needle, backed off along its jaws by ``STANDBY_DISTANCE``. The extraction then starts from
+needle, backed off along its jaws by ``STANDBY_DISTANCE`` and out of the cameras' sight of
+the emerging tip. The extraction then starts from
 there with a short approach onto the needle as actually seen. Nothing is confirmed here but
 reach: the extraction checks its own grasp.
 """
@@ -15,6 +16,7 @@ from suture_bt.planning import NeedleArcError, plan_needle_arc
 from suture_bt.skills.base import Skill, SkillFailure, Waiting
 from suture_bt.skills.context import TaskContext
 from suture_bt.skills.grasps import backed_off, pulling_hand, tip_goal
+from suture_bt.skills.line_of_sight import clear_tip_pose
 from suture_bt.skills.motion import feasible, move_to
 
 #: How far back along its jaws from the planned pulling grasp the arm waits (m).
@@ -41,7 +43,11 @@ class StandBy(Skill):
         except NeedleArcError as e:
             raise SkillFailure(f"pair {self.pair}: {e.reason}") from None
         T_end = arc.needle_pose(arc.insert_end_angle)
-        return backed_off(tip_goal(T_end, pulling_hand(ctx.needle)), STANDBY_DISTANCE)
+        T = backed_off(tip_goal(T_end, pulling_hand(ctx.needle)), STANDBY_DISTANCE)
+        # Out of the cameras' sight of the emerging tip: the insertion confirms from images.
+        rcm = ctx.arm(self.arm_name).base_frame()[:3, 3]
+        cleared = clear_tip_pose(ctx, T, rcm, arc.tip_position(arc.insert_end_angle))
+        return T if cleared is None else cleared
 
     def program(self) -> Waiting:
         ctx = self.context
