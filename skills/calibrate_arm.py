@@ -3,7 +3,10 @@
 Wraps the stepwise :class:`~suture_bt.calibration.Calibration` (calibration pose, one image,
 keypoint CNN + MLP). The jaw must be empty (the pose opens it, and the regressor was trained
 on an empty jaw), so the skill fails with that reason when the belief says the arm holds the
-needle. In the oracle ablation the true offset is installed instead, labelled in the report.
+needle. A lost frame (:class:`FrameLost` from the calibration's capture) is captured again
+after a short back-off in simulated time, up to ``MAX_LOST_FRAMES`` in a row; then the skill
+fails with that reason. In the oracle ablation the true offset is installed instead, labelled
+in the report.
 """
 
 from __future__ import annotations
@@ -11,8 +14,14 @@ from __future__ import annotations
 import numpy as np
 
 from suture_bt.calibration.calibrate import Calibration
+from suture_bt.interfaces import FrameLost
 from suture_bt.skills.base import Skill, SkillFailure, Waiting
 from suture_bt.skills.context import TaskContext
+from suture_bt.skills.motion import wait
+
+#: Lost frames in a row before the calibration gives up, and the back-off between tries (s).
+MAX_LOST_FRAMES = 3
+FRAME_BACK_OFF = 0.1
 
 
 class CalibrateArm(Skill):
@@ -32,9 +41,23 @@ class CalibrateArm(Skill):
         self.say(f"calibrating {self.arm_name}: moving to the calibration pose")
         cal = Calibration(handle.arm, ctx.camera, handle.servo)
         cal.start()
+        lost: list[str] = []
         while cal.phase not in ("done", "failed"):
             yield
-            cal.step(self.dt)
+            try:
+                cal.step(self.dt)
+            except FrameLost as e:  # the pose is held; the next step captures again
+                lost.append(f"{e.reason} at {e.stamp:.2f} s")
+                self.report["frames_lost"] = list(lost)
+                if len(lost) >= MAX_LOST_FRAMES:
+                    raise SkillFailure(
+                        f"calibration of {self.arm_name} failed: "
+                        f"{len(lost)} frames lost in a row ({lost[-1]})"
+                    ) from None
+                self.say(f"calibrating {self.arm_name}: frame lost ({len(lost)}), capturing again")
+                yield from wait(ctx.clock, FRAME_BACK_OFF)
+                continue
+            lost.clear()  # only losses in a row count
             self.say(f"calibrating {self.arm_name}: {cal.phase}")
         if cal.failure is not None:
             raise SkillFailure(f"calibration of {self.arm_name} failed: {cal.failure}")

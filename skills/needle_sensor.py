@@ -1,14 +1,20 @@
 """The needle sensor skills use: capture a stereo frame and localise the needle in it.
 
-Vision only (images + the calibrated camera model): the localiser's refusal (its reason) and a
-lost frame become :class:`NeedleNotSeen`. The last frame and estimate are kept for logging.
+Vision only (images + the calibrated camera model): the localiser's refusal (its reason)
+becomes :class:`NeedleNotSeen`. A lost frame (:class:`FrameLost`) or a darkened one (seen in the
+image: far darker than the frames before it) is captured again at once, up to
+``MAX_BAD_FRAMES`` frames in a row; then the sensor refuses with that reason ("3 frames lost
+in a row"), or takes a frame still dark at the limit as the new lighting. ``observe`` runs
+inside a skill's tick, so it re-captures instead of waiting; the calibration skill, which owns
+its capture, backs off in simulated time instead. The last frame and estimate are kept for
+logging; a lost frame clears the last frame.
 """
 
 from __future__ import annotations
 
 import numpy as np
 
-from suture_bt.interfaces import StereoCameraInterface
+from suture_bt.interfaces import FrameLost, StereoCameraInterface
 from suture_bt.perception.arc_evidence import arc_support
 from suture_bt.perception.needle_localizer import NeedleLocalizer
 from suture_bt.perception.pose_fit import NeedleNotFound
@@ -18,6 +24,15 @@ from suture_bt.skills.context import NeedleNotSeen, NeedleObservation
 #: pose its arm predicts): a needle in a port is partly hidden by the tissue and fits worse,
 #: and the prior, not the residual, then guards against a wrong answer.
 PRIOR_CHECKED_RMS_PX = 0.9
+#: Frames lost or dark in a row before the sensor gives up.
+MAX_BAD_FRAMES = 3
+#: A frame whose mean brightness is below this share of the good frames' is dark.
+DARK_SHARE = 0.6
+
+
+def brightness(frame) -> float:
+    """Mean intensity of the left image (what a dark frame shows)."""
+    return float(np.mean(frame.left))
 
 
 class VisionNeedleSensor:
@@ -33,15 +48,15 @@ class VisionNeedleSensor:
         self.last_frame = None
         self.last_estimate = None
         self.calls = 0
+        #: Bad frames re-captured so far, as (kind, reason) (kind: "lost" or "dark").
+        self.bad_frames: list[tuple[str, str]] = []
+        self._reference: float | None = None  # brightness of the last good frame
 
     def observe(
         self, previous: np.ndarray | None = None, prior_checked: bool = False
     ) -> NeedleObservation:
         self.calls += 1
-        try:
-            frame = self.camera.capture()
-        except Exception as exc:  # noqa: BLE001 - a lost frame is a refusal with its reason
-            raise NeedleNotSeen(f"no frame: {exc}") from exc
+        frame = self.capture()
         self.last_frame, self.last_estimate = frame, None
         T_cam_world = self.camera.model.left.T_cam_world
         prev_cam = None if previous is None else T_cam_world @ np.asarray(previous, dtype=float)
@@ -63,6 +78,33 @@ class VisionNeedleSensor:
             "vision",
             {"rms_px": float(est.rms_px), "total_ms": float(est.timings_ms["total"])},
         )
+
+    def capture(self):
+        """A good frame: a lost or dark one is captured again, up to ``MAX_BAD_FRAMES`` in a
+        row. All lost: refuse with that reason. Still dark at the limit: the light has
+        changed, so the last dark frame becomes the new reference and is used."""
+        dark = None
+        for _ in range(MAX_BAD_FRAMES):
+            try:
+                frame = self.camera.capture()
+            except FrameLost as exc:
+                self.last_frame = None
+                self.bad_frames.append(("lost", exc.reason))
+                continue
+            except Exception as exc:  # noqa: BLE001 - no frame at all is a refusal
+                self.last_frame = None
+                raise NeedleNotSeen(f"no frame: {exc}") from exc
+            level = brightness(frame)
+            if self._reference is not None and level < DARK_SHARE * self._reference:
+                dark = frame
+                self.bad_frames.append(("dark", f"{level:.0f} vs {self._reference:.0f} before"))
+                continue
+            self._reference = level
+            return frame
+        if dark is None:
+            raise NeedleNotSeen(f"{MAX_BAD_FRAMES} frames lost in a row")
+        self._reference = brightness(dark)
+        return dark
 
     def support(self, T_world_needle: np.ndarray, angles: np.ndarray) -> tuple[float, float]:
         """Share of the arc at ``angles`` of a predicted pose seen as metal in the last frame."""
