@@ -101,7 +101,9 @@ class Handover(Skill):
         self.say(f"{self.giver} presents the needle for {self.taker}")
         taker.arm.jaw.move_jp(np.array([JAW_OPEN]))  # opens while the giver presents
         for T in poses:
-            present = move_to(ctx.clock, giver, [T], "present the needle")
+            present = move_to(
+                ctx.clock, giver, presentation.lifted_first(ctx, giver, T), "present the needle"
+            )
             # The taker waits a little back along its jaws, out of the cameras' sight.
             T_needle_there = T @ belief.T_tip_needle
             rcm, centre = taker.base_frame()[:3, 3], T_needle_there[:3, 3]

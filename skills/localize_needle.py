@@ -57,7 +57,9 @@ class LocalizeNeedle(Skill):
         self.report["presentation_poses"] = [T.tolist() for T in poses]
         for i, T in enumerate(poses[:MAX_PRESENTATIONS]):
             self.say(f"presenting the needle held by {arm.name} ({i + 1}/{len(poses)})")
-            present = move_to(ctx.clock, arm, [T], "present the needle")
+            present = move_to(
+                ctx.clock, arm, presentation.lifted_first(ctx, arm, T), "present the needle"
+            )
             yield from together(present, *self._make_way(self._target(T)))
             obs = self._look(reasons)
             if obs is not None:

@@ -52,7 +52,7 @@ def move_to(
     """Move the tip through world poses (straight lines + SLERP), then settle.
 
     When the straight path leaves the joint limits on the way (the tool roll wraps), and
-    ``joint_ok``, the arm goes to the last goal in joint space instead (free space only).
+    ``joint_ok``, the arm goes through the goals in joint space instead (free space only).
     """
     base = arm.base_frame()
     goals = [to_base(np.asarray(g, dtype=float), base) for g in goals_world]
@@ -61,11 +61,14 @@ def move_to(
     )
     st = move.start(arm.servo.setpoint_jp())
     if st.failed and joint_ok:
-        try:
-            q = inverse_kinematics(goals[-1], arm.servo.setpoint_jp())
-        except UnreachablePoseError as e:
-            raise SkillFailure(f"{what}: {arm.name} cannot: {e.reason}") from None
-        move = JointMove(arm.servo, [q])
+        qs, q = [], arm.servo.setpoint_jp()
+        for goal in goals:  # through every goal (e.g. a lift first), in joint space
+            try:
+                q = inverse_kinematics(goal, q)
+            except UnreachablePoseError as e:
+                raise SkillFailure(f"{what}: {arm.name} cannot: {e.reason}") from None
+            qs.append(q)
+        move = JointMove(arm.servo, qs)
     yield from _follow(clock, arm, move, what)
 
 

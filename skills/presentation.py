@@ -104,3 +104,19 @@ def choose(
         if len(good) >= 5:
             break
     return good, why
+
+
+def lifted_first(ctx: TaskContext, arm: ArmHandle, T_goal: np.ndarray) -> list[np.ndarray]:
+    """Waypoints to a presentation pose: straight up first (along the phantom's up axis) when
+    the arm's tip is lower than ``MIN_CLEARANCE`` above the highest port, so a held needle is
+    not dragged over the tissue or through the planes of the ports next to it."""
+    up = ctx.phantom.T_world_phantom[:3, 2]
+    ports = np.array([p.position for p in ctx.phantom.ports()])
+    T_now = arm.commanded_tip_world()
+    rise = MIN_CLEARANCE - float(np.min((T_now[:3, 3] - ports) @ up))
+    if rise <= 0.0:
+        return [T_goal]
+    T_up = T_now.copy()
+    T_up[:3, 3] += rise * up
+    return [T_up, T_goal] if not feasible(arm, [T_up]) else [T_goal]
+
