@@ -66,7 +66,9 @@ def code_version() -> dict[str, Any]:
             timeout=10,
         ).stdout.split("\n")
     except (OSError, subprocess.SubprocessError):
-        return {"commit": None, "modified": []}
+        head, dirty = "", []
+    if not head and (root / "COMMIT").is_file():  # a source snapshot (git archive) says so
+        return {"commit": (root / "COMMIT").read_text().strip(), "modified": [], "snapshot": True}
     return {"commit": head or None, "modified": [ln[3:] for ln in dirty if ln.strip()]}
 
 
