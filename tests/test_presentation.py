@@ -6,18 +6,19 @@ import numpy as np
 import pytest
 
 from suture_bt.control import PIServo
-from suture_bt.geometry import PhantomModel
+from suture_bt.geometry import NeedleModel, PhantomModel
 from suture_bt.kinematics import forward_kinematics, inverse_kinematics
 from suture_bt.planning import to_base
 from suture_bt.sim.camera import stereo_model
 from suture_bt.sim.world import psm_base_frame
-from suture_bt.skills.context import ArmHandle
-from suture_bt.skills.grasps import GRASP_DEPTH
+from suture_bt.skills.context import ArmHandle, NeedleBelief
+from suture_bt.skills.grasps import GRASP_DEPTH, hand
 from suture_bt.skills.presentation import (
     DEPTH,
     DIRECTIONS,
     MIN_CLEARANCE,
     candidate_poses,
+    lifted_first,
     presentation_point,
 )
 from suture_bt.transforms import make_transform, pose_to_transform
@@ -57,6 +58,8 @@ def make_ctx(T_world_phantom=None):
     return SimpleNamespace(
         camera=CAMERA,
         phantom=PhantomModel(np.eye(4) if T_world_phantom is None else T_world_phantom),
+        needle=NeedleModel(),
+        belief=None,
     )
 
 
@@ -162,3 +165,29 @@ def test_candidate_poses_do_not_command_the_arm():
     arm = make_arm("psm2")
     candidate_poses(make_ctx(), arm)
     assert arm.arm.commands == [] and arm.servo.desired is None
+
+
+@pytest.mark.parametrize("phantom", sorted(PHANTOMS))
+def test_a_low_tip_rises_straight_up_before_it_is_presented(phantom):
+    ctx = make_ctx(PHANTOMS[phantom])
+    arm = make_arm("psm2")  # at the Task 3 start pose, the needle 10-16 mm above the entries
+    ctx.belief = NeedleBelief(np.eye(4), 0.0, "test", "psm2", hand(ctx.needle, np.deg2rad(155)))
+    goal = candidate_poses(ctx, arm)[0]
+    up_first, final = lifted_first(ctx, arm, goal)
+    T_now = arm.commanded_tip_world()
+    rise = up_first[:3, 3] - T_now[:3, 3]
+    up = ctx.phantom.T_world_phantom[:3, 2]
+    assert np.linalg.norm(np.cross(rise, up)) < 1e-9 and rise @ up > 0  # straight up
+    T_needle = up_first @ ctx.belief.T_tip_needle  # the lowest needle point now clears
+    arc = ctx.needle.point_at(np.linspace(ctx.needle.tip_angle, ctx.needle.base_angle, 9))
+    pts = arc @ T_needle[:3, :3].T + T_needle[:3, 3]
+    assert min(clearance(ctx, p) for p in pts) == pytest.approx(MIN_CLEARANCE, abs=1e-9)
+    np.testing.assert_allclose(up_first[:3, :3], T_now[:3, :3])
+    assert final is goal
+
+
+def test_a_tip_already_high_goes_straight_to_the_presentation():
+    ctx = make_ctx(make_transform(None, (0.0, 0.0, -0.03)))  # the phantom 30 mm lower
+    arm = make_arm("psm2")
+    goal = candidate_poses(ctx, arm)[0]
+    assert lifted_first(ctx, arm, goal) == [goal]
