@@ -16,6 +16,7 @@ from suture_bt.skills.handover import Handover
 from suture_bt.skills.insert import Insert
 from suture_bt.skills.localize_needle import LocalizeNeedle
 from suture_bt.skills.pick_up import PickUp
+from suture_bt.skills.recover import BackOut, OpenAndBackOff
 from suture_bt.skills.stand_by import StandBy
 
 #: Chooses the taker's arc angle when a handover starts (the belief is known only then).
@@ -74,14 +75,14 @@ class HandOver(SkillBehaviour):
 
 
 class InsertNeedle(SkillBehaviour):
-    """Drive the needle through a port pair."""
+    """Drive the needle through a port pair (``confirm_only``: look again at the tip)."""
 
-    def __init__(self, arm: str, pair: int, name: str | None = None):
+    def __init__(self, arm: str, pair: int, name: str | None = None, confirm_only: bool = False):
         super().__init__(name or f"Insert pair {pair}")
-        self.arm, self.pair = arm, pair
+        self.arm, self.pair, self.confirm_only = arm, pair, confirm_only
 
     def make_skill(self):
-        return Insert(self.context, self.arm, self.pair)
+        return Insert(self.context, self.arm, self.pair, self.confirm_only)
 
 
 class ExtractNeedle(SkillBehaviour):
@@ -146,3 +147,30 @@ def away_from_holder_and(later: AngleRule) -> AngleRule:
         return free_angle(ctx.needle, avoid)
 
     return rule
+
+
+class OpenAndBackOffArm(SkillBehaviour):
+    """Recovery after an empty close: ``arm`` opens its jaw and backs off along its jaws."""
+
+    def __init__(self, arm: str, name: str | None = None):
+        super().__init__(name or f"{arm.upper()} opens and backs off")
+        self.arm = arm
+
+    def make_skill(self):
+        return OpenAndBackOff(self.context, self.arm)
+
+
+class BackOutNeedle(SkillBehaviour):
+    """Recovery after an unconfirmed insertion: back the needle out along its arc."""
+
+    def __init__(self, arm: str, pair: int, name: str | None = None):
+        super().__init__(name or f"Back out of pair {pair}")
+        self.arm, self.pair = arm, pair
+
+    def make_skill(self):
+        swept = None  # the grasp the last insertion of this pair swept with
+        for r in reversed(self.context.reports):
+            if r.get("skill") == "insert" and "T_tip_needle" in r:
+                swept = r["T_tip_needle"]
+                break
+        return BackOut(self.context, self.arm, self.pair, swept)

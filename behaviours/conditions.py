@@ -10,7 +10,7 @@ import py_trees
 from py_trees.common import Status
 
 from suture_bt.behaviours.skill_behaviour import needs
-from suture_bt.skills.checks import jaw_holds_wire
+from suture_bt.skills.checks import JAW_CLOSED_MAX, jaw_holds_wire
 from suture_bt.skills.reach import pair_reach
 
 
@@ -87,3 +87,48 @@ class PairsInReach(_Condition):
                 return False, why
         return True, f"pairs {', '.join(map(str, self.pairs))} in reach of both arms"
 
+
+def _closed_empty(angle: float) -> bool:
+    """A jaw closed (≤ the closing threshold) below the wire: nothing between its blades."""
+    return angle <= JAW_CLOSED_MAX and not jaw_holds_wire(angle)[0]
+
+
+class GraspMissed(_Condition):
+    """``arm`` closed on nothing while the needle is still believed in another arm's jaw."""
+
+    def __init__(self, arm: str, name: str | None = None):
+        super().__init__(name or f"{arm.upper()} closed empty?")
+        self.arm = arm
+
+    def ask(self) -> tuple[bool, str]:
+        b = self.context.belief
+        angle = self.context.arm(self.arm).jaw_angle()
+        if b is not None and b.holder == self.arm:
+            return False, f"{self.arm} is believed to hold the needle: not a missed grasp"
+        if not _closed_empty(angle):
+            return False, f"{self.arm}'s jaw is not closed empty ({jaw_holds_wire(angle)[1]})"
+        return True, f"{self.arm} missed: {jaw_holds_wire(angle)[1]}"
+
+
+class NeedleStillHeld(py_trees.behaviour.Behaviour):
+    """A watch (RUNNING while all is well): FAILURE once the believed holder's jaw has
+    closed below the wire, i.e. the needle dropped out of it."""
+
+    def __init__(self, name: str = "Needle still held?"):
+        super().__init__(name)
+        self.context = None
+
+    def setup(self, **kwargs) -> None:
+        self.context = needs(kwargs, "context", f"watch {self.name!r}")
+
+    def update(self) -> Status:
+        b = self.context.belief
+        if b is None or b.holder is None:
+            self.feedback_message = "no holder to watch"
+            return Status.RUNNING
+        angle = self.context.arm(b.holder).jaw_angle()
+        if _closed_empty(angle):
+            self.feedback_message = f"needle dropped by {b.holder} ({jaw_holds_wire(angle)[1]})"
+            return Status.FAILURE
+        self.feedback_message = f"{b.holder}'s jaw at {angle:.3f} rad"
+        return Status.RUNNING

@@ -5,6 +5,10 @@ grasp leaves room for the tip to come out (the planner's grasp limit), brings th
 then a few millimetres before the entry, sweeps the needle about its own centre until the tip
 stands 6 mm out past the exit, and confirms from a fresh image that the tip emerged within the
 SRC 2.5 mm of the exit port and stands at least 5 mm out.
+
+Started again with the needle already at the end of its sweep (a retry after the emerged tip
+was not confirmed), it only looks again, after a short back-off; ``confirm_only`` asks for
+that look and fails when the needle is not there.
 """
 
 from __future__ import annotations
@@ -16,7 +20,8 @@ from suture_bt.skills import checks
 from suture_bt.skills.base import Skill, SkillFailure, Waiting
 from suture_bt.skills.context import NeedleNotSeen, TaskContext
 from suture_bt.skills.grasps import JAW_CLEARANCE
-from suture_bt.skills.motion import FINE, follow_poses, move_to
+from suture_bt.skills.motion import FINE, follow_poses, move_to, wait
+from suture_bt.transforms import rotation_angle
 
 #: The sweep starts with the tip this far (arc length) before the entry, and the approach
 #: comes down to it along the entry normal from this height (m).
@@ -25,6 +30,10 @@ PRE_ARC, LIFT = 0.006, 0.010
 SWEEP = {"angular_speed": 1.0, "angular_acc": 5.0}
 #: Looks at the emerged tip before giving up.
 CONFIRM_LOOKS = 2
+#: A needle this close to the sweep's end pose (m, deg) is already inserted; the back-off
+#: before looking again (s).
+AT_END_M, AT_END_DEG = 0.003, 10.0
+LOOK_AGAIN_AFTER = 0.1
 
 
 class Insert(Skill):
@@ -32,10 +41,11 @@ class Insert(Skill):
 
     name = "insert"
 
-    def __init__(self, context: TaskContext, arm: str, pair: int):
+    def __init__(self, context: TaskContext, arm: str, pair: int, confirm_only: bool = False):
         super().__init__(context)
         self.arm_name = arm
         self.pair = pair
+        self.confirm_only = confirm_only
         self.arc = None
 
     def program(self) -> Waiting:
@@ -58,6 +68,16 @@ class Insert(Skill):
             "port_angle_deg": float(np.rad2deg(arc.port_angle)),
             "insert_end_angle_deg": float(np.rad2deg(arc.insert_end_angle)),
         }
+        at_end = self._at_sweep_end(arm, arc, T_gn)
+        if at_end or self.confirm_only:
+            if not at_end:
+                raise SkillFailure(f"{where}: the needle is not at the end of its sweep")
+            self.report["resumed"] = True
+            self.say(f"{where}: needle at the end of its sweep, looking at the tip again")
+            yield from wait(ctx.clock, LOOK_AGAIN_AFTER)
+            yield from self._confirm(arm, exit_)
+            return
+        self.report["T_tip_needle"] = np.asarray(T_gn, dtype=float).tolist()  # sweep's grasp
         T_inv = np.linalg.inv(T_gn)
         lift, pre = (T @ T_inv for T in arc.approach_poses(PRE_ARC, LIFT))
         self.say(f"{where}: approaching {entry.name}")
@@ -74,6 +94,15 @@ class Insert(Skill):
         )
         yield from follow_poses(ctx.clock, arm, sweep, f"{where}: drive the needle")
         yield from self._confirm(arm, exit_)
+
+    @staticmethod
+    def _at_sweep_end(arm, arc, T_gn: np.ndarray) -> bool:
+        """The commanded needle stands where the insertion sweep ends (already inserted)."""
+        T_now = arm.commanded_tip_world() @ T_gn
+        T_end = arc.needle_pose(arc.insert_end_angle)
+        dp = float(np.linalg.norm(T_now[:3, 3] - T_end[:3, 3]))
+        da = float(np.rad2deg(rotation_angle(T_now[:3, :3], T_end[:3, :3])))
+        return dp <= AT_END_M and da <= AT_END_DEG
 
     def _confirm(self, arm, exit_) -> Waiting:
         """From a fresh frame: the localiser's answer if it agrees with the arm's prediction,
@@ -116,8 +145,11 @@ class Insert(Skill):
         # continued past the tip, where no needle must be seen.
         emerged = needle.tip_angle + np.linspace(0.0, (out - 0.001) / needle.radius, 12)
         beyond = needle.tip_angle - np.deg2rad(np.linspace(4.0, 16.0, 8))
-        on = min(self.context.sensor.support(predicted, emerged))
-        off = max(self.context.sensor.support(predicted, beyond))
+        try:
+            on = min(self.context.sensor.support(predicted, emerged))
+            off = max(self.context.sensor.support(predicted, beyond))
+        except NeedleNotSeen:  # no frame to look in (the capture was lost)
+            return None
         self.report["evidence"] = {"emerged_on_metal": on, "beyond_on_metal": off}
         if on >= 0.75 and off <= 0.25:
             return f"tip seen on {100 * on:.0f} % of the emerged piece, {100 * off:.0f} % past it"

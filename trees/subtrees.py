@@ -5,6 +5,14 @@ preparation calibrates PSM1, localises the needle (presented by PSM2), hands it 
 calibrates PSM2 and takes it back at the grasp the throws need (its in-hand transform then
 re-estimated from images with a calibrated arm). A throw: PSM2 inserts through the entry,
 PSM1 pulls it through the exit, and (unless it is the last) hands it back to PSM2.
+
+Recovery branches (Nav2-style :class:`RecoveryNode`, one retry each): a failed handover is
+retried after the taker re-opens and backs off and the giver's needle is re-localised; an
+extraction whose grasp closed empty re-opens, backs off and tries again; an insertion not
+confirmed is looked at again (a needle at the end of its sweep is then only confirmed), or
+backed out along its arc, re-localised and inserted once more. A watch
+beside every throw's steps fails the throw when the holder's jaw closes below the wire
+("needle dropped by psm2").
 """
 
 from __future__ import annotations
@@ -16,18 +24,27 @@ from py_trees.common import ComparisonExpression
 
 from suture_bt.behaviours import blackboard_keys as keys
 from suture_bt.behaviours.actions import (
+    BackOutNeedle,
     Calibrate,
     ExtractNeedle,
     HandOver,
     InsertNeedle,
     Localize,
+    OpenAndBackOffArm,
     PickUpNeedle,
     StandByAtExit,
     away_from_holder_and,
     grasp_for_pairs,
 )
-from suture_bt.behaviours.conditions import NeedleLocalised, PairsInReach
+from suture_bt.behaviours.conditions import (
+    GraspMissed,
+    NeedleLocalised,
+    NeedleStillHeld,
+    PairsInReach,
+)
 from suture_bt.behaviours.needle_start import NeedleStart
+from suture_bt.behaviours.parallel import ParallelWithReason
+from suture_bt.behaviours.recovery import recovery_idiom
 from suture_bt.behaviours.sim_timeout import SimTimeout
 from suture_bt.behaviours.throw_scope import ThrowScope
 
@@ -35,6 +52,8 @@ from suture_bt.behaviours.throw_scope import ThrowScope
 INSERTER, PULLER = "psm2", "psm1"
 #: Simulated-time limits (s): preparation, and one throw.
 PREPARE_LIMIT, THROW_LIMIT = 60.0, 45.0
+#: Retries of each recovery branch.
+RETRIES = 1
 
 
 def prepare(pairs: tuple[int, ...]) -> py_trees.behaviour.Behaviour:
@@ -46,16 +65,18 @@ def prepare(pairs: tuple[int, ...]) -> py_trees.behaviour.Behaviour:
         children=[
             Calibrate(PULLER),
             Localize(INSERTER),
-            HandOver(
-                INSERTER,
-                PULLER,
-                away_from_holder_and(grasp),
-                pulling=True,
-                name="PSM2 hands the needle to PSM1",
+            retried_handover(
+                HandOver(
+                    INSERTER,
+                    PULLER,
+                    away_from_holder_and(grasp),
+                    pulling=True,
+                    name="PSM2 hands the needle to PSM1",
+                )
             ),
             Calibrate(INSERTER),
-            HandOver(
-                PULLER, INSERTER, grasp, next_pair=pairs[0], name="PSM1 hands it back"
+            retried_handover(
+                HandOver(PULLER, INSERTER, grasp, next_pair=pairs[0], name="PSM1 hands it back")
             ),
         ],
     )
@@ -92,7 +113,7 @@ def pick_up_children(grasp) -> list[py_trees.behaviour.Behaviour]:
 def insert_while_standing_by(pair: int) -> py_trees.behaviour.Behaviour:
     """PSM2 inserts while PSM1 comes to wait at the exit (optional: a PSM1 that cannot wait
     there comes from where it is; the extraction checks its own reach)."""
-    return py_trees.composites.Parallel(
+    return ParallelWithReason(
         f"Insert pair {pair}, PSM1 waits",
         policy=py_trees.common.ParallelPolicy.SuccessOnAll(synchronise=True),
         children=[
@@ -104,23 +125,85 @@ def insert_while_standing_by(pair: int) -> py_trees.behaviour.Behaviour:
     )
 
 
+def retried_handover(handover: HandOver) -> py_trees.behaviour.Behaviour:
+    """The handover; when it fails with the needle still in the giver's jaw, the taker
+    re-opens and backs off, the giver's needle is localised again, and it is tried again."""
+    giver, taker = handover.giver, handover.taker
+    recovery = py_trees.composites.Sequence(
+        f"Re-localise in {giver.upper()}, {taker.upper()} backs off",
+        memory=True,
+        children=[
+            NeedleLocalised(giver, name=f"Needle still in {giver.upper()}'s hand?"),
+            OpenAndBackOffArm(taker),
+            Localize(giver),
+        ],
+    )
+    return recovery_idiom(f"Retry: {handover.name}", handover, recovery, RETRIES)
+
+
+def retried_insertion(pair: int) -> py_trees.behaviour.Behaviour:
+    """Insert; when the emerged tip is not confirmed, first look at it again (the frames may
+    have been lost or dark: then the retry only confirms), else back out along the arc,
+    re-localise the needle in PSM2's hand (a fresh in-hand transform) and insert once more."""
+    back_out = py_trees.composites.Sequence(
+        f"Back out of pair {pair} and re-localise",
+        memory=True,
+        children=[
+            NeedleLocalised(INSERTER, name="Needle still in PSM2's hand?"),
+            BackOutNeedle(INSERTER, pair),
+            Localize(INSERTER),
+        ],
+    )
+    recovery = py_trees.composites.Selector(
+        f"Recover insertion {pair}",
+        memory=True,
+        children=[
+            InsertNeedle(INSERTER, pair, f"Look at the tip past exit {pair} again", True),
+            back_out,
+        ],
+    )
+    return recovery_idiom(
+        f"Retry: insert pair {pair}", insert_while_standing_by(pair), recovery, RETRIES
+    )
+
+
+def retried_extraction(pair: int) -> py_trees.behaviour.Behaviour:
+    """Extract; when PSM1's jaw closed empty, it re-opens, backs off and tries again."""
+    recovery = py_trees.composites.Sequence(
+        f"PSM1 re-opens after a miss at pair {pair}",
+        memory=True,
+        children=[GraspMissed(PULLER), OpenAndBackOffArm(PULLER)],
+    )
+    return recovery_idiom(
+        f"Retry: extract pair {pair}", ExtractNeedle(PULLER, INSERTER, pair), recovery, RETRIES
+    )
+
+
 def throw(pair: int, later_pairs: tuple[int, ...]) -> py_trees.behaviour.Behaviour:
     """One throw through ``pair``; ``later_pairs`` decide the grasp PSM2 takes back."""
     steps = [
         in_reach((pair,)),
         NeedleLocalised(INSERTER, name="Needle in PSM2's hand?"),
-        insert_while_standing_by(pair),
-        ExtractNeedle(PULLER, INSERTER, pair),
+        retried_insertion(pair),
+        retried_extraction(pair),
     ]
     if later_pairs:
         steps.append(
-            HandOver(
-                PULLER,
-                INSERTER,
-                grasp_for_pairs(later_pairs),
-                next_pair=later_pairs[0],
-                name=f"Hand back after pair {pair}",
+            retried_handover(
+                HandOver(
+                    PULLER,
+                    INSERTER,
+                    grasp_for_pairs(later_pairs),
+                    next_pair=later_pairs[0],
+                    name=f"Hand back after pair {pair}",
+                )
             )
         )
     seq = py_trees.composites.Sequence(f"Pair {pair} steps", memory=True, children=steps)
-    return ThrowScope(pair, SimTimeout(f"Pair {pair} (time limit)", seq, THROW_LIMIT))
+    watched = ParallelWithReason(
+        f"Pair {pair}, needle watched",
+        policy=py_trees.common.ParallelPolicy.SuccessOnSelected([seq], synchronise=False),
+        children=[NeedleStillHeld(), seq],
+        voice=1,
+    )
+    return ThrowScope(pair, SimTimeout(f"Pair {pair} (time limit)", watched, THROW_LIMIT))
