@@ -169,7 +169,7 @@ def test_wilson_interval_and_reason_grouping():
     assert wilson(0, 10) == pytest.approx((0.0, 0.2775), abs=1e-4)
     assert wilson(10, 10) == pytest.approx((0.7225, 1.0), abs=1e-4)
     assert wilson(5, 10) == pytest.approx((0.2366, 0.7634), abs=1e-4)
-    assert wilson(0, 0) == (0.0, 1.0)
+    assert wilson(0, 0) == (0.0, 1.0) and wilson(0, 3)[0] == 0.0 and wilson(7, 7)[1] == 1.0
     assert reason_key("entry lateral 3.1 mm > 2.5 mm") == "entry lateral # mm > # mm"
 
 

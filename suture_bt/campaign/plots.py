@@ -101,10 +101,11 @@ def write_plots(out: Path, rows: list[dict[str, Any]], summary: dict[str, Any]) 
             r = b[key]
             if r["n"]:
                 lo, hi = wilson(r["k"], r["n"])
+                p = r["k"] / r["n"]
                 xs.append(c + shift)
-                ys.append(r["rate"])
-                err[0].append(r["rate"] - lo)
-                err[1].append(hi - r["rate"])
+                ys.append(p)
+                err[0].append(max(0.0, p - lo))  # float noise at 0 % or 100 %
+                err[1].append(max(0.0, hi - p))
         ax.errorbar(xs, ys, yerr=err, fmt="o", capsize=4, color=colour, label=key)
     ax.set_ylim(-0.05, 1.05)
     ax.set_xlim(0, 1)
