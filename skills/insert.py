@@ -144,7 +144,9 @@ class Insert(Skill):
         # The piece in front of the exit surface (1 mm kept clear of it), and the circle
         # continued past the tip, where no needle must be seen.
         emerged = needle.tip_angle + np.linspace(0.0, (out - 0.001) / needle.radius, 12)
-        beyond = needle.tip_angle - np.deg2rad(np.linspace(4.0, 16.0, 8))
+        # (from 10°, 1.8 mm, past the predicted tip: the in-hand estimate may be a few
+        # degrees off along the circle, and the real tip then stands that much further out)
+        beyond = needle.tip_angle - np.deg2rad(np.linspace(10.0, 22.0, 8))
         try:
             on = min(self.context.sensor.support(predicted, emerged))
             off = max(self.context.sensor.support(predicted, beyond))
