@@ -135,8 +135,17 @@ def reachable_sim_objects(root: object, max_depth: int = 8) -> list[tuple[str, o
 # ---------------------------------------------------------------------- source checks
 ROOT = Path(__file__).resolve().parents[1]
 
-#: Front-door modules of the core (paths relative to suture_bt/): they wire worlds to trees.
-FRONT_DOOR = ("cli.py", "commands/", "runtime/", "evaluation/", "oracle/", "datagen/")
+#: Front-door modules of the core (paths relative to suture_bt/): they wire worlds to trees
+#: and score runs (DESIGN.md §2; evaluation campaigns are part of it).
+FRONT_DOOR = (
+    "cli.py",
+    "commands/",
+    "runtime/",
+    "evaluation/",
+    "campaign/",
+    "oracle/",
+    "datagen/",
+)
 RESTRICTED_DIRS = ("skills", "behaviours", "trees")
 #: Folders installed under another name (pyproject package-dir).
 INSTALLED_AS = {
