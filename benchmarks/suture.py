@@ -4,6 +4,7 @@ ground truth; ``--oracle`` runs the same scenes with ground truth fed to the ski
 
     .venv/bin/python benchmarks/suture.py --seeds 11 12 13 --json suture.json
     .venv/bin/python benchmarks/suture.py --oracle --json suture_oracle.json
+    .venv/bin/python benchmarks/suture.py --faults mild --conditions --seeds 1 2 3 4
 
 Every run is the embedded SRC scene at the Task 3 start (needle in PSM2's jaw) with both
 arms' hidden offsets set by the condition ("random": drawn from the full bounds by the seed).
@@ -16,6 +17,7 @@ import json
 import time
 from pathlib import Path
 
+import fault_stats
 import numpy as np
 
 from suture_bt.runtime.session import RunOptions, Session
@@ -25,22 +27,28 @@ from suture_bt.sim.scene import scene_from_dict
 import_pybullet_quietly()
 
 
-def scene_for(condition: str, seed: int):
+def scene_for(condition: str, seed: int, faults: str = "none"):
     return scene_from_dict(
         {
             "seed": seed,
             "needle": {"start": "in_psm2_jaw"},
             "arms": {"psm1": {"joint_offset": condition}, "psm2": {"joint_offset": condition}},
+            "faults": faults,
         }
     )
 
 
-def run_one(condition: str, seed: int, oracle: bool) -> dict:
-    session = Session(RunOptions(oracle=oracle), scene_for(condition, seed))
+def run_one(condition: str, seed: int, oracle: bool, faults: str = "none") -> dict:
+    session = Session(RunOptions(oracle=oracle), scene_for(condition, seed, faults))
     t0 = time.perf_counter()
     try:
         session.run()
         result = session.result()
+        events = fault_stats.fired_events(session.world)
+        result["faults_fired"] = events
+        result["faults_detected"] = fault_stats.tree_detections(session)
+        result["recoveries"] = fault_stats.recoveries(session.root)
+        result["fault_throws"] = fault_stats.throw_outcomes(result, events, session.context.throws)
     finally:
         session.close()
     result["condition"] = condition
@@ -108,12 +116,17 @@ def main() -> None:
     )
     ap.add_argument("--conditions", nargs="*", default=["A", "B", "C"])
     ap.add_argument("--oracle", action="store_true", help="ground truth fed to the skills")
+    ap.add_argument(
+        "--faults",
+        default="none",
+        help="fault profile of sim/fault_profiles.yaml (none, mild, harsh) for every run",
+    )
     ap.add_argument("--json", type=Path)
     args = ap.parse_args()
     cases = [(c, 0) for c in args.conditions] + [("random", s) for s in args.seeds]
     runs = []
     for cond, seed in cases:
-        r = run_one(cond, seed, args.oracle)
+        r = run_one(cond, seed, args.oracle, args.faults)
         runs.append(r)
         ok = sum(t["passed"] for t in r["throws"])
         print(
@@ -128,12 +141,21 @@ def main() -> None:
             print(f"  {k:<28} {v if not isinstance(v, float) else round(v, 3)}")
     for f in s["failures"]:
         print("  failed:", f)
+    if args.faults != "none":
+        s["faults"] = fault_stats.summarise_faults(runs)
+        print(
+            f"faults ({args.faults}): kind, events, runs fired, detected by the tree, "
+            "throws hit, of those passed"
+        )
+        for kind, row in s["faults"].items():
+            print(f"  {kind:<11} " + "  ".join(f"{k} {v}" for k, v in row.items()))
     if args.json:
         args.json.write_text(
             json.dumps(
                 {
                     "summary": s,
                     "oracle": args.oracle,
+                    "faults": args.faults,
                     "runs": [{k: v for k, v in r.items() if k != "ports"} for r in runs],
                 },
                 indent=1,
