@@ -72,3 +72,14 @@ def test_run_rejects_a_malformed_scene_in_one_line(tmp_path, capsys):
     assert main(["run", "--scene", str(scene), "--out", str(tmp_path / "out")]) == 1
     err = capsys.readouterr().err.strip().splitlines()
     assert len(err) == 1 and "scene.camera.width" in err[0]
+
+
+def test_run_with_missing_weights_ends_in_one_line(tmp_path, capsys, monkeypatch):
+    import suture_bt.perception.network as network
+
+    monkeypatch.setattr(network, "DEFAULT_WEIGHTS", tmp_path / "gone" / "needle_net.pt")
+    assert main(["run", "localize", "--out", str(tmp_path / "out"), "--rerun", "off"]) == 1
+    captured = capsys.readouterr()
+    err = captured.err.strip().splitlines()
+    assert len(err) == 1 and "needle_net.pt" in err[0], err
+    assert "Traceback" not in captured.err + captured.out
