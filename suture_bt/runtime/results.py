@@ -96,6 +96,18 @@ def throw_table(result: dict[str, Any]) -> str:
         "sim s",
         "failure",
     )
+    if not result["throws"]:  # a tree without throws: its own verdict
+        verdict = "PASSED" if result["passed"] else "FAILED"
+        lines = [
+            f"run {verdict}: tree {result.get('tree_status')}, no throws, "
+            f"{result['sim_time_s']:.1f} s simulated, {result['wall_time_s']:.1f} s wall"
+        ]
+        lines += [
+            f"{k.replace('_', ' ')}: {result[k]}"
+            for k in ("tree_failure", "error")
+            if result.get(k)
+        ]
+        return "\n".join(lines)
     rows = [head]
     for t in result["throws"]:
         rows.append(

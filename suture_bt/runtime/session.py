@@ -190,7 +190,13 @@ class Session:
                     float(np.rad2deg(err[1])),
                     float(1e3 * err[2]),
                 ]
-        return result_document(self, scores, calibration, passed=run_passed(scores))
+        # A tree without throws (calibrate, localize) passes when it ends in SUCCESS.
+        passed = (
+            run_passed(scores)
+            if scores
+            else self.error is None and self.root.status is py_trees.common.Status.SUCCESS
+        )
+        return result_document(self, scores, calibration, passed=passed)
 
     def write(self, out: Path) -> dict[str, Any]:
         """Write ``result.json`` and ``trajectory.csv`` into ``out``; returns the result."""
