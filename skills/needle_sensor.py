@@ -8,6 +8,12 @@ in a row"), or takes a frame still dark at the limit as the new lighting. ``obse
 inside a skill's tick, so it re-captures instead of waiting; the calibration skill, which owns
 its capture, backs off in simulated time instead. The last frame and estimate are kept for
 logging; a lost frame clears the last frame.
+
+Task priors (:mod:`suture_bt.perception.needle_prior`) go to the localiser when the caller
+knows them: a prior-checked ``previous`` (the pose the holding arm's motion predicts) becomes a
+predicted-pose prior within the tolerance the caller checks it to (``checks.poses_agree``), and
+a ``holder`` (arm name, its measured tip pose) a held-by prior at the pinch point between its
+jaws. They pick the right one of the localiser's mirror twins, or make it refuse naming them.
 """
 
 from __future__ import annotations
@@ -16,8 +22,11 @@ import numpy as np
 
 from suture_bt.interfaces import FrameLost, StereoCameraInterface
 from suture_bt.perception.arc_evidence import arc_support
+from suture_bt.perception.in_hand import JAW_POINT_IN_TIP
 from suture_bt.perception.needle_localizer import NeedleLocalizer
+from suture_bt.perception.needle_prior import HeldPrior, NeedlePrior, PredictedPosePrior
 from suture_bt.perception.pose_fit import NeedleNotFound
+from suture_bt.skills.checks import AGREE_ANGLE_DEG, AGREE_POSITION
 from suture_bt.skills.context import NeedleNotSeen, NeedleObservation
 
 #: Worst edge residual (px) accepted when the caller checks the answer against a prior (the
@@ -28,6 +37,10 @@ PRIOR_CHECKED_RMS_PX = 0.9
 MAX_BAD_FRAMES = 3
 #: A frame whose mean brightness is below this share of the good frames' is dark.
 DARK_SHARE = 0.6
+#: How far (m) the held wire may pass from the pinch point the holder's measured tip pose
+#: gives: a few mm while its joint offset is uncalibrated (the default), sub-mm once it is.
+HELD_TOLERANCE = 0.004
+HELD_TOLERANCE_CALIBRATED = 0.001
 
 
 def brightness(frame) -> float:
@@ -39,7 +52,9 @@ class VisionNeedleSensor:
     """``observe(previous)``: capture, localise, answer in the world frame or refuse.
 
     ``prior_checked=True`` says the caller will reject an answer that disagrees with
-    ``previous``; the localiser may then accept a looser outline fit.
+    ``previous``; the localiser may then accept a looser outline fit, and ``previous`` is
+    passed as a predicted-pose prior. ``holder`` = (arm name, T_world_tip from its measured
+    joints) adds a held-by prior within ``holder_tolerance`` (m).
     """
 
     def __init__(self, camera: StereoCameraInterface, localizer: NeedleLocalizer | None = None):
@@ -53,8 +68,13 @@ class VisionNeedleSensor:
         self._reference: float | None = None  # brightness of the last good frame
 
     def observe(
-        self, previous: np.ndarray | None = None, prior_checked: bool = False
+        self,
+        previous: np.ndarray | None = None,
+        prior_checked: bool = False,
+        holder: tuple[str, np.ndarray] | None = None,
+        holder_tolerance: float = HELD_TOLERANCE,
     ) -> NeedleObservation:
+        """Capture and localise (world frame), with the priors the caller's knowledge gives."""
         self.calls += 1
         frame = self.capture()
         self.last_frame, self.last_estimate = frame, None
@@ -64,7 +84,12 @@ class VisionNeedleSensor:
         if prior_checked and prev_cam is not None:
             self.localizer.max_rms_px = max(strict_rms, PRIOR_CHECKED_RMS_PX)
         try:
-            est = self.localizer.localize(frame.left, frame.right, previous=prev_cam)
+            est = self.localizer.localize(
+                frame.left,
+                frame.right,
+                previous=prev_cam,
+                priors=self.priors(previous, prior_checked, holder, holder_tolerance),
+            )
         except NeedleNotFound as exc:
             raise NeedleNotSeen(str(exc)) from exc
         finally:
@@ -76,8 +101,33 @@ class VisionNeedleSensor:
             float(est.angle_std_deg),
             float(est.position_std_mm),
             "vision",
-            {"rms_px": float(est.rms_px), "total_ms": float(est.timings_ms["total"])},
+            {
+                "rms_px": float(est.rms_px),
+                "total_ms": float(est.timings_ms["total"]),
+                "priors": [type(p).__name__ for p in est.priors],
+            },
         )
+
+    @staticmethod
+    def priors(
+        previous: np.ndarray | None,
+        prior_checked: bool,
+        holder: tuple[str, np.ndarray] | None,
+        holder_tolerance: float = HELD_TOLERANCE,
+    ) -> list[NeedlePrior]:
+        """The task priors for the localiser from what the caller gave (world frame)."""
+        out: list[NeedlePrior] = []
+        if prior_checked and previous is not None:
+            T = np.asarray(previous, dtype=float)
+            out.append(
+                PredictedPosePrior(T, AGREE_POSITION, AGREE_ANGLE_DEG, "the arm's prediction")
+            )
+        if holder is not None:
+            arm, T_tip = holder
+            T_tip = np.asarray(T_tip, dtype=float)
+            pinch = T_tip[:3, :3] @ JAW_POINT_IN_TIP + T_tip[:3, 3]
+            out.append(HeldPrior(arm, pinch, holder_tolerance))
+        return out
 
     def capture(self):
         """A good frame: a lost or dark one is captured again, up to ``MAX_BAD_FRAMES`` in a

@@ -14,6 +14,7 @@ from __future__ import annotations
 
 import os
 import time
+from collections.abc import Sequence
 from dataclasses import dataclass, field, replace
 
 import cv2
@@ -39,6 +40,12 @@ from suture_bt.perception.needle_ends import (
     base_evidence,
     swapped,
     with_band_pieces,
+)
+from suture_bt.perception.needle_prior import (
+    NeedlePrior,
+    PredictedPosePrior,
+    PriorContradicted,
+    check_orientation,
 )
 from suture_bt.perception.network import (
     INPUT_SIZE,
@@ -126,6 +133,8 @@ class NeedleEstimate:
     timings_ms: dict
     fit: PoseFitResult = field(repr=False)
     masks: tuple[MaskView, MaskView] = field(repr=False)
+    #: The task priors the answer was checked against (:mod:`needle_prior`; empty: none).
+    priors: tuple = ()
 
     @property
     def angle_std_deg(self) -> float:
@@ -256,10 +265,20 @@ class NeedleLocalizer:
         return ends, depth
 
     def localize(
-        self, left: np.ndarray, right: np.ndarray, previous: np.ndarray | None = None
+        self,
+        left: np.ndarray,
+        right: np.ndarray,
+        previous: np.ndarray | None = None,
+        priors: Sequence[NeedlePrior] = (),
     ) -> NeedleEstimate:
         """Estimate the needle pose; ``previous`` (T_cam_needle) warm-starts the fit and, when
         the swage band is not seen, says which end is the base (a tracked or held needle).
+
+        ``priors`` (world frame, :mod:`needle_prior`: held by an arm, in a port, a predicted
+        pose) choose between the fit's candidates (the mirror twins); an image no candidate of
+        which agrees with them is refused with a reason naming the prior
+        (:class:`~suture_bt.perception.needle_prior.PriorContradicted`). A predicted pose also
+        decides base ↔ tip when the swage band does not, like ``previous``.
 
         Raises :class:`NeedleNotFound` (with a reason) when the needle is not visible enough,
         including when base and tip cannot be told apart and there is no ``previous``.
@@ -286,11 +305,16 @@ class NeedleLocalizer:
             # edge-on folds onto itself): drop the hint and gate at the nearest working distance.
             views, half_width, depth = self._masks((left, right), prob, scale, None, anchors)
         t2 = time.perf_counter()
-        fit = self._fit((left, right), views, ends, depth, half_width, previous, kp, score)
+        priors = tuple(priors)
+        predicted = [p for p in priors if isinstance(p, PredictedPosePrior)]
+        if previous is None and predicted:
+            previous = self.stereo.left.T_cam_world @ np.asarray(predicted[0].T_world_needle)
+        fit = self._fit((left, right), views, ends, depth, half_width, previous, kp, score, priors)
         t3 = time.perf_counter()
         T_cam, evidence, decided_by = self._orient(
             fit.T_cam_needle, (left, right), views, half_width, previous
         )
+        check_orientation(predicted, self.stereo.left.T_world_cam @ T_cam, decided_by)
         t4 = time.perf_counter()
         return NeedleEstimate(
             T_cam_needle=T_cam,
@@ -311,6 +335,7 @@ class NeedleLocalizer:
             },
             fit=fit,
             masks=(views[0], views[1]),
+            priors=priors,
         )
 
     def _masks(self, images, prob, scale, depth, anchors=(None, None)):
@@ -373,7 +398,9 @@ class NeedleLocalizer:
             views.append(view)
         return views, half_width, depth
 
-    def _fit(self, images, views, ends, depth, half_width, previous, kp, score) -> PoseFitResult:
+    def _fit(
+        self, images, views, ends, depth, half_width, previous, kp, score, priors=()
+    ) -> PoseFitResult:
         """Fit from the keypoints (and depth hint), plus end hypotheses behind occluders.
 
         An end of the visible needle that touches a grey occluder (or the border) may continue
@@ -384,7 +411,8 @@ class NeedleLocalizer:
         failed fit often means a keypoint landed off the needle (e.g. on a jaw) or the disparity
         depth was wrong: it is refit without the depth hint, from the keypoints and from the
         mask's own ends. (Refitting poor fits too, as before, cost 10-15 ms per occluded frame
-        for one scene in 200 once the search above was in place.)
+        for one scene in 200 once the search above was in place.) ``priors`` go to the fitter;
+        when every attempt is refused by them, the prior's reason is the refusal.
         """
         left = images[0]
         visible_ends = ends if ends is not None else mask_ends(views[0])
@@ -402,13 +430,13 @@ class NeedleLocalizer:
         along = geodesic_ends(views[0])
         if along is not None and not _same_pair(along, visible_ends):
             behind.append(along)
-        priors = [kp[eye][score[eye] >= STRONG_KEYPOINT_SCORE] for eye in (0, 1)]
+        end_priors = [kp[eye][score[eye] >= STRONG_KEYPOINT_SCORE] for eye in (0, 1)]
         # The violet band marks the base: it guides the search as a keypoint would.
         bands = [band_pixels(img, view) for img, view in zip(images, views, strict=True)]
         for eye in (0, 1):
             if bands[eye] is not None:
-                priors[eye] = np.concatenate([priors[eye], bands[eye].mean(0)[None]])
-        priors = tuple(priors)
+                end_priors[eye] = np.concatenate([end_priors[eye], bands[eye].mean(0)[None]])
+        end_priors = tuple(end_priors)
 
         def attempt(main, alternatives, depth_hint=None) -> PoseFitResult:
             return self.fitter.fit(
@@ -418,14 +446,18 @@ class NeedleLocalizer:
                 depth_hint=depth_hint,
                 warm_start=previous,
                 alternatives=alternatives,
-                end_priors=priors,
+                end_priors=end_priors,
                 hidden_end=hidden,
+                priors=priors,
             )
 
         fit = None
+        contradicted: PriorContradicted | None = None
         try:
             fit = attempt(ends, behind, depth)
-        except NeedleNotFound:
+        except NeedleNotFound as exc:
+            if isinstance(exc, PriorContradicted):
+                contradicted = exc
             if ends is None and depth is None:
                 raise
         if fit is None and ends is not None:
@@ -434,8 +466,12 @@ class NeedleLocalizer:
             main, others = (ends, [None]) if depth is not None else (None, [])
             try:
                 fit = attempt(main, others)
+            except PriorContradicted as exc:
+                contradicted = exc
             except NeedleNotFound:
                 pass
+        if fit is None and contradicted is not None:
+            raise contradicted
         if fit is None:
             raise NeedleNotFound("no pose explains the needle's outline (every start failed)")
         if fit.rms_px > self.max_rms_px:

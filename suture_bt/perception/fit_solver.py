@@ -1,0 +1,159 @@
+"""Robust batched Levenberg-Marquardt over the needle parameters, and a fit's predicted spread."""
+
+from __future__ import annotations
+
+import numpy as np
+
+from suture_bt.geometry import NeedleModel
+from suture_bt.interfaces import StereoCameraModel
+from suture_bt.perception.edge_residuals import EdgeRays, edge_jacobian, residuals
+from suture_bt.perception.needle_projection import params_to_pose
+
+#: Finite-difference steps of the six parameters (px, px, px, px, rad, rad) for the pose's
+#: derivatives and the extra terms' (the edge residuals' derivatives are analytic).
+FD_STEPS = np.array([0.02, 0.02, 0.02, 0.02, 2e-5, 2e-4])
+
+#: Robust losses of the fit: Cauchy (outliers grow logarithmically; a wide basin for the
+#: search) and Geman-McClure (outliers cost a constant; the pose that explains the most edge
+#: points tightly wins, however a few stray mask pixels lie).
+LOSSES = ("cauchy", "geman_mcclure")
+
+
+def _irls_weights(r: np.ndarray, sigma: float, loss: str) -> np.ndarray:
+    """IRLS weights ψ(r)/r of the loss."""
+    q = 1.0 + (r / sigma) ** 2
+    return 1.0 / q if loss == "cauchy" else 1.0 / q**2
+
+
+def robust_cost(
+    r: np.ndarray, sigma: float, weights: np.ndarray | None = None, loss: str = "cauchy"
+) -> np.ndarray:
+    """(Weighted) mean robust loss per start (inf where any residual is undefined)."""
+    if loss not in LOSSES:
+        raise ValueError(f"unknown loss {loss!r}; expected one of {LOSSES}")
+    x2 = (r / sigma) ** 2
+    c = 0.5 * sigma**2 * (np.log1p(x2) if loss == "cauchy" else x2 / (1.0 + x2))
+    out = c.mean(-1) if weights is None else (c * weights).sum(-1) / weights.sum()
+    return np.where(np.isfinite(out), out, np.inf)
+
+
+def _pose_derivatives(x: np.ndarray, T: np.ndarray, cam, model: NeedleModel):
+    """Poses stepped by FD_STEPS in each of the six parameters (K, 6, 4, 4) and the forward
+    differences dT/dx (K, 6, 4, 4) at the poses T (K, 4, 4) of parameters x (K, 6)."""
+    T6 = params_to_pose(x[:, None, :] + np.diag(FD_STEPS)[None], cam, model)
+    return T6, (T6 - T[:, None]) / FD_STEPS[None, :, None, None]
+
+
+def levenberg_marquardt(
+    x: np.ndarray,
+    rays: EdgeRays,
+    stereo: StereoCameraModel,
+    model: NeedleModel,
+    iters: int,
+    sigma: float,
+    extra=None,
+    loss: str = "cauchy",
+) -> tuple[np.ndarray, np.ndarray]:
+    """Batched robust LM over starts x (K, 6); returns (x, cost).
+
+    ``extra`` (a term or a list of terms: ``term(T) -> (K, M)`` residuals in px, and
+    ``term.column_weights(n_edge)``) adds residuals (free space, keypoint prior) to the edge
+    residuals.
+    """
+    x = np.array(x, dtype=float)
+    cam = stereo.left
+    extras = [e for e in (extra if isinstance(extra, list | tuple) else [extra]) if e]
+    colw = np.concatenate([np.ones(len(rays))] + [e.column_weights(len(rays)) for e in extras])
+
+    def both(T, *a, **k):
+        r, th = residuals(T, rays, model, *a, **k)
+        return (np.concatenate([r] + [e(T) for e in extras], 1) if extras else r), th
+
+    T = params_to_pose(x, cam, model)
+    r, theta = both(T)
+    cost = robust_cost(r, sigma, colw, loss)
+    lam = np.full(len(x), 1e-2)
+    n_edge = len(rays)
+    for _ in range(iters):
+        ok = np.isfinite(cost)
+        if not ok.any():
+            break
+        w = colw * _irls_weights(r, sigma, loss)
+        w = np.where(np.isfinite(w), w, 0.0)
+        rr = np.where(np.isfinite(r), r, 0.0)
+        # Pose derivatives by finite differences (cheap: 6 poses per start), residual
+        # derivatives analytically for the edge points, by differences for the extra terms.
+        T6, dT = _pose_derivatives(x, T, cam, model)
+        J = edge_jacobian(T, dT, rays, model, theta)
+        if extras:
+            re = np.concatenate([e(T6.reshape(-1, 4, 4)) for e in extras], 1)
+            re = re.reshape(len(x), 6, -1) - rr[:, None, n_edge:]
+            J = np.concatenate([J, re / FD_STEPS[None, :, None]], 2)
+        J = np.where(np.isfinite(J), J, 0.0)
+        Jw = J * w[:, None, :]
+        A = Jw @ J.transpose(0, 2, 1)
+        g = (Jw @ rr[..., None])[..., 0]
+        diag = np.einsum("kii->ki", A) + 1e-9
+        Ad = A + lam[:, None, None] * np.einsum("ki,ij->kij", diag, np.eye(6))
+        try:
+            delta = -np.linalg.solve(Ad, g[..., None])[..., 0]
+        except np.linalg.LinAlgError:
+            break
+        xn = x + delta
+        Tn = params_to_pose(xn, cam, model)
+        rn, thn = both(Tn, theta_start=theta)
+        cn = robust_cost(rn, sigma, colw, loss)
+        better = cn < cost
+        x[better], T[better], r[better], theta[better], cost[better] = (
+            xn[better],
+            Tn[better],
+            rn[better],
+            thn[better],
+            cn[better],
+        )
+        lam = np.where(better, lam / 3.0, lam * 4.0)
+        lam = np.clip(lam, 1e-7, 1e7)
+    return x, cost
+
+
+def pose_uncertainty(
+    x: np.ndarray,
+    rays: EdgeRays,
+    stereo: StereoCameraModel,
+    model: NeedleModel,
+    sigma: float = 1.0,
+    loss: str = "geman_mcclure",
+) -> tuple[float, float]:
+    """Predicted spread of a fitted pose: (angle std in degrees, arc-centre std in mm).
+
+    The Gauss-Newton covariance s²·(Jᵀ W J)⁻¹ of the robust edge fit at parameters ``x``
+    (W the loss's IRLS weights, s² their weighted residual variance), carried to the needle
+    frame's rotation and origin. It is large where the seen outline leaves the pose free: a
+    short, nearly straight visible piece fixes neither the arc's plane nor how it goes on behind
+    an occluder. Neighbouring edge residuals are treated as independent (they are not), so it
+    ranks views by how firmly they pin the pose; it is not a calibrated standard deviation.
+    """
+    cam = stereo.left
+    x = np.asarray(x, dtype=float)[None]
+    T = params_to_pose(x, cam, model)
+    r, theta = residuals(T, rays, model)
+    _, dT = _pose_derivatives(x, T, cam, model)
+    J = edge_jacobian(T, dT, rays, model, theta)[0]
+    r = r[0]
+    ok = np.isfinite(r) & np.isfinite(J).all(0)
+    if ok.sum() <= len(FD_STEPS):
+        return float("inf"), float("inf")
+    J, r = J[:, ok], r[ok]
+    w = _irls_weights(r, sigma, loss)
+    s2 = float((w * r * r).sum() / max(w.sum() - len(FD_STEPS), 1.0))
+    cov = s2 * np.linalg.pinv((J * w) @ J.T)
+    # Per parameter: the small rotation R0ᵀ dR (the axial vector of its skew part) and the
+    # origin's shift.
+    S = np.einsum("ji,kjl->kil", T[0, :3, :3], dT[0, :, :3, :3])
+    J_rot = 0.5 * np.stack(
+        [S[:, 2, 1] - S[:, 1, 2], S[:, 0, 2] - S[:, 2, 0], S[:, 1, 0] - S[:, 0, 1]]
+    )
+    J_pos = dT[0, :, :3, 3].T
+    var_rot = max(float(np.trace(J_rot @ cov @ J_rot.T)), 0.0)
+    var_pos = max(float(np.trace(J_pos @ cov @ J_pos.T)), 0.0)
+    return float(np.degrees(np.sqrt(var_rot))), float(1e3 * np.sqrt(var_pos))

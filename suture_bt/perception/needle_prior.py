@@ -1,0 +1,167 @@
+"""Task priors a caller may give the needle localiser, each with its own uncertainty.
+
+A thin arc seen through a 4 mm baseline has a tilt-mirror ("Necker") twin that explains the
+outline almost as well as the needle does (DESIGN.md §5). What the task knows breaks the tie:
+
+- :class:`HeldPrior`: the needle is held by an arm, so its wire passes between that arm's
+  jaws at the pinch point (from the arm's measured tip pose: a few mm off while the arm is
+  uncalibrated, sub-mm once its joint offset is compensated);
+- :class:`PortPrior`: the needle is in a port, so its arc passes through the port's known
+  position;
+- :class:`PredictedPosePrior`: the pose the holding arm's motion predicts.
+
+The fit keeps, among its final candidates (both twins), those consistent with every prior and
+answers the best-cost one; when none is consistent it refuses (:class:`PriorContradicted`) with
+a reason naming the prior, never forcing an answer. Priors are in the world frame; the base ↔
+tip choice is made later from colour, so the pose prior's angle is taken modulo that swap.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+from dataclasses import dataclass
+
+import numpy as np
+
+from suture_bt.geometry import NeedleModel
+from suture_bt.perception.refusal import NeedleNotFound
+from suture_bt.transforms import rotation_angle
+
+
+class PriorContradicted(NeedleNotFound):
+    """No pose that explains the images agrees with the caller's prior; ``reason`` says why."""
+
+
+def arc_distance(point_world: np.ndarray, T_world_needle: np.ndarray, model: NeedleModel) -> float:
+    """Distance (m) from a world point to the needle's centre-line arc at a pose (exact)."""
+    R, t = T_world_needle[:3, :3], T_world_needle[:3, 3]
+    p = R.T @ (np.asarray(point_world, float) - t)
+    theta = float(np.arctan2(p[1], p[0]))
+    if model.tip_angle <= theta <= model.base_angle:
+        return float(np.hypot(np.hypot(p[0], p[1]) - model.radius, p[2]))
+    # Outside the arc's span the nearest point is an end (the distance grows with the angle).
+    return float(min(np.linalg.norm(p - model.tip), np.linalg.norm(p - model.base)))
+
+
+def _swap_rotation(model: NeedleModel) -> np.ndarray:
+    """The half turn about the arc's bisector that exchanges base and tip (needle frame)."""
+    mid = 0.5 * (model.base_angle + model.tip_angle)
+    axis = np.array([np.cos(mid), np.sin(mid), 0.0])
+    return 2.0 * np.outer(axis, axis) - np.eye(3)
+
+
+@dataclass(frozen=True)
+class HeldPrior:
+    """Held by ``arm``: the wire passes within ``tolerance`` (m) of ``pinch_point`` (world)."""
+
+    arm: str
+    pinch_point: np.ndarray
+    tolerance: float = 0.003
+
+    def miss(self, T_world_needle: np.ndarray, model: NeedleModel) -> float:
+        """Distance from the pinch point to the arc over the tolerance (≤ 1: consistent)."""
+        return arc_distance(self.pinch_point, T_world_needle, model) / self.tolerance
+
+    def refusal(self, nearest: float) -> str:
+        """The reason when the nearest candidate misses by ``nearest`` tolerances."""
+        return (
+            f"no fitted pose passes {self.arm}'s pinch point: nearest "
+            f"{1e3 * nearest * self.tolerance:.1f} mm, tolerance {1e3 * self.tolerance:.1f} mm"
+        )
+
+
+@dataclass(frozen=True)
+class PortPrior:
+    """In port ``port``: the arc passes within ``tolerance`` (m) of ``point`` (world)."""
+
+    port: str
+    point: np.ndarray
+    tolerance: float = 0.003
+
+    def miss(self, T_world_needle: np.ndarray, model: NeedleModel) -> float:
+        """Distance from the port to the arc over the tolerance (≤ 1: consistent)."""
+        return arc_distance(self.point, T_world_needle, model) / self.tolerance
+
+    def refusal(self, nearest: float) -> str:
+        """The reason when the nearest candidate misses by ``nearest`` tolerances."""
+        return (
+            f"no fitted pose passes through port {self.port}: nearest "
+            f"{1e3 * nearest * self.tolerance:.1f} mm, tolerance {1e3 * self.tolerance:.1f} mm"
+        )
+
+
+@dataclass(frozen=True)
+class PredictedPosePrior:
+    """The pose the arm's motion predicts (world), within a centre distance (m) and angle
+    (deg); the angle is taken modulo the base ↔ tip swap, which colour decides later."""
+
+    T_world_needle: np.ndarray
+    position_tolerance: float = 0.003
+    angle_tolerance_deg: float = 12.0
+    source: str = "the predicted pose"
+
+    def errors(self, T_world_needle: np.ndarray, model: NeedleModel) -> tuple[float, float]:
+        """Centre distance (m) and angle (deg, modulo the swap) from the prediction."""
+        P = np.asarray(self.T_world_needle, float)
+        dp = float(np.linalg.norm(T_world_needle[:3, 3] - P[:3, 3]))
+        R = T_world_needle[:3, :3]
+        da = min(rotation_angle(P[:3, :3], R), rotation_angle(P[:3, :3], R @ _swap_rotation(model)))
+        return dp, float(np.degrees(da))
+
+    def miss(self, T_world_needle: np.ndarray, model: NeedleModel) -> float:
+        """The larger of position and angle error over their tolerances (≤ 1: consistent)."""
+        dp, da = self.errors(T_world_needle, model)
+        return max(dp / self.position_tolerance, da / self.angle_tolerance_deg)
+
+    def refusal(self, nearest: float) -> str:
+        """The reason when the nearest candidate misses by ``nearest`` tolerances."""
+        return (
+            f"no fitted pose agrees with {self.source}: nearest {nearest:.1f}× the tolerance "
+            f"({1e3 * self.position_tolerance:.1f} mm / {self.angle_tolerance_deg:.0f}°)"
+        )
+
+
+NeedlePrior = HeldPrior | PortPrior | PredictedPosePrior
+
+
+def prior_misses(
+    priors: Sequence[NeedlePrior], T_world: np.ndarray, model: NeedleModel
+) -> np.ndarray:
+    """Misses (K, P) of K candidate poses (K, 4, 4) against P priors (≤ 1: consistent)."""
+    return np.array([[p.miss(T, model) for p in priors] for T in T_world]).reshape(
+        len(T_world), len(priors)
+    )
+
+
+def consistent(misses: np.ndarray) -> np.ndarray:
+    """Which candidates (rows of :func:`prior_misses`) agree with every prior."""
+    return np.all(misses <= 1.0, axis=1)
+
+
+def contradiction(priors: Sequence[NeedlePrior], misses: np.ndarray) -> PriorContradicted:
+    """The refusal when no candidate is consistent: each violated prior and its nearest miss."""
+    parts = []
+    for j, p in enumerate(priors):
+        nearest = float(np.min(misses[:, j])) if len(misses) else float("inf")
+        if nearest > 1.0 or len(priors) == 1:
+            parts.append(p.refusal(nearest))
+    if not parts:
+        parts.append("no fitted pose agrees with all the priors at once")
+    return PriorContradicted("; ".join(parts))
+
+
+def check_orientation(
+    predicted: Sequence[PredictedPosePrior], T_world: np.ndarray, decided_by: str
+) -> None:
+    """Refuse when the swage band put the base at the end a predicted pose calls the tip (the
+    fit checked the prediction modulo that swap)."""
+    for p in predicted:
+        dp = float(np.linalg.norm(T_world[:3, 3] - np.asarray(p.T_world_needle)[:3, 3]))
+        da = float(
+            np.degrees(rotation_angle(np.asarray(p.T_world_needle)[:3, :3], T_world[:3, :3]))
+        )
+        if da > p.angle_tolerance_deg:
+            raise PriorContradicted(
+                f"the needle's ends disagree with {p.source}: {dp * 1e3:.1f} mm / {da:.0f}° "
+                f"from it once base and tip were told apart ({decided_by})"
+            )

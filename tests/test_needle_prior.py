@@ -1,0 +1,173 @@
+"""Task priors (held by an arm, in a port, a predicted pose) pick the right one of the fit's
+mirror twins, and a prior the image contradicts is a refusal naming it, never an answer."""
+
+import numpy as np
+import pytest
+from perception_helpers import pose_errors
+from test_pose_fit import MODEL, _scene_1080p, _tip_hidden
+
+from suture_bt.perception.needle_prior import (
+    HeldPrior,
+    PortPrior,
+    PredictedPosePrior,
+    PriorContradicted,
+    arc_distance,
+    check_orientation,
+)
+from suture_bt.perception.pose_fit import NeedleNotFound, PoseFitter
+from suture_bt.transforms import make_transform
+
+
+def _twin_case():
+    """Tip hidden, a misleading alternative and no second search: the unconstrained fit
+    answers the tilt-mirror twin (> 10 mm off; see test_pose_fit's mirror-twin test)."""
+    st, T, left, right, ends = _scene_1080p(10, 0.0)
+    occ, short, _ = _tip_hidden(st, T, left, right, ends)
+    alt = [tuple(ends + np.array([[30.0, 10.0], [-20.0, 25.0]]))]
+    kw = dict(alternatives=alt, hidden_end=False)
+    return st, T, occ, short, kw
+
+
+def _world(st, T_cam):
+    return st.left.T_world_cam @ T_cam
+
+
+def _arc_point(T_world, angle):
+    return T_world[:3, :3] @ MODEL.point_at(angle) + T_world[:3, 3]
+
+
+def test_arc_distance_is_zero_on_the_wire_and_the_offset_off_it():
+    T = make_transform(np.eye(3), (0.01, 0.02, 0.1))
+    on = _arc_point(T, 2.0)
+    assert arc_distance(on, T, MODEL) < 1e-6
+    off = on + np.array([0.0, 0.0, 0.004])  # out of the arc's plane
+    assert arc_distance(off, T, MODEL) == pytest.approx(0.004, abs=1e-5)
+
+
+def test_held_prior_turns_the_mirror_twin_into_the_right_answer():
+    st, T, occ, short, kw = _twin_case()
+    free = PoseFitter(st, MODEL).fit(*occ, short, **kw)
+    assert pose_errors(free.T_cam_needle, T)[0] > 10.0  # the twin, unconstrained
+    assert free.prior_misses == ()
+    # The arm holds the wire near its base (the visible part), 1 mm off: tolerance 2 mm.
+    pinch = _arc_point(_world(st, T), MODEL.base_angle - 0.4) + np.array([0.0, 0.001, 0.0])
+    held = HeldPrior("psm2", pinch, tolerance=0.002)
+    res = PoseFitter(st, MODEL).fit(*occ, short, priors=[held], **kw)
+    pos, ang = pose_errors(res.T_cam_needle, T)
+    assert pos < 1.0 and ang < 4.0
+    assert len(res.prior_misses) == 1 and res.prior_misses[0] <= 1.0
+
+
+def test_between_near_tied_twins_the_prior_not_the_cost_decides():
+    """With the second search the fit's two final candidates are the needle and a twin 18 mm /
+    130 deg away costing only a hair more (ambiguity 5e-4): a coin toss the prior settles."""
+    st, T, occ, short, kw = _twin_case()
+    kw["hidden_end"] = True
+    free = PoseFitter(st, MODEL).fit(*occ, short, **kw)
+    assert pose_errors(free.T_cam_needle, T)[0] < 1.0
+    twin = next(c for c in free.candidates if pose_errors(c, T)[0] > 10.0)
+    assert free.ambiguity < 0.1 * free.cost
+    on_twin = HeldPrior("psm1", _arc_point(_world(st, twin), 2.0), tolerance=0.002)
+    res = PoseFitter(st, MODEL).fit(*occ, short, priors=[on_twin], **kw)
+    assert pose_errors(res.T_cam_needle, twin)[0] < 0.5 and res.cost > free.cost
+    on_needle = HeldPrior("psm1", _arc_point(_world(st, T), 2.0), tolerance=0.002)
+    res = PoseFitter(st, MODEL).fit(*occ, short, priors=[on_needle], **kw)
+    np.testing.assert_allclose(res.T_cam_needle, free.T_cam_needle)
+
+
+def test_port_and_predicted_pose_priors_choose_the_right_twin():
+    st, T, occ, short, kw = _twin_case()
+    Tw = _world(st, T)
+    port = PortPrior("entry2", _arc_point(Tw, MODEL.tip_angle + 0.5), tolerance=0.003)
+    res = PoseFitter(st, MODEL).fit(*occ, short, priors=[port], **kw)
+    assert pose_errors(res.T_cam_needle, T)[0] < 1.0
+    guess = Tw.copy()
+    guess[:3, 3] += (0.001, -0.001, 0.0)  # the arm's prediction, 1.4 mm off
+    pred = PredictedPosePrior(guess, position_tolerance=0.003, angle_tolerance_deg=10.0)
+    res = PoseFitter(st, MODEL).fit(*occ, short, priors=[pred], **kw)
+    assert pose_errors(res.T_cam_needle, T)[0] < 1.0
+
+
+def test_a_prior_the_image_contradicts_is_refused_with_its_reason():
+    st, T, occ, short, kw = _twin_case()
+    far = _arc_point(_world(st, T), 2.0) + np.array([0.0, 0.0, 0.02])
+    with pytest.raises(
+        PriorContradicted,
+        match=r"psm2's pinch point: nearest \d+\.\d mm, "
+        r"tolerance 2\.0 mm",
+    ) as info:
+        PoseFitter(st, MODEL).fit(*occ, short, priors=[HeldPrior("psm2", far, 0.002)], **kw)
+    assert isinstance(info.value, NeedleNotFound)  # callers' refusal handling still applies
+    with pytest.raises(PriorContradicted, match="through port exit1"):
+        PoseFitter(st, MODEL).fit(*occ, short, priors=[PortPrior("exit1", far, 0.003)], **kw)
+
+
+def test_a_predicted_pose_also_fixes_which_end_is_the_base():
+    T = make_transform(np.eye(3), (0.0, 0.0, 0.1))
+    pred = PredictedPosePrior(T)
+    flipped = T.copy()
+    flipped[:3, :3] = np.diag([-1.0, -1.0, 1.0])  # 180° about z: a different needle
+    check_orientation([pred], T, "colour")
+    with pytest.raises(PriorContradicted, match="ends disagree with the predicted pose"):
+        check_orientation([pred], flipped, "colour")
+
+
+def test_without_priors_the_fit_is_unchanged():
+    st, T, occ, short, kw = _twin_case()
+    a = PoseFitter(st, MODEL).fit(*occ, short, **kw)
+    b = PoseFitter(st, MODEL).fit(*occ, short, priors=(), **kw)
+    np.testing.assert_array_equal(a.T_cam_needle, b.T_cam_needle)
+
+
+def test_sensor_builds_the_priors_its_caller_knows():
+    from suture_bt.perception.in_hand import JAW_POINT_IN_TIP
+    from suture_bt.skills.checks import AGREE_ANGLE_DEG, AGREE_POSITION
+    from suture_bt.skills.needle_sensor import VisionNeedleSensor
+
+    T = make_transform(np.eye(3), (0.0, 0.05, 0.07))
+    tip = make_transform(np.eye(3), (0.01, 0.05, 0.08))
+    assert VisionNeedleSensor.priors(T, False, None) == []  # a warm start only
+    (pred,) = VisionNeedleSensor.priors(T, True, None)
+    assert isinstance(pred, PredictedPosePrior)
+    assert (pred.position_tolerance, pred.angle_tolerance_deg) == (AGREE_POSITION, AGREE_ANGLE_DEG)
+    pred, held = VisionNeedleSensor.priors(T, True, ("psm2", tip), 0.001)
+    assert held.arm == "psm2" and held.tolerance == 0.001
+    np.testing.assert_allclose(held.pinch_point, tip[:3, 3] + JAW_POINT_IN_TIP)
+
+
+def test_rendered_held_needle_with_its_holders_prior_and_a_contradicting_one():
+    """A held needle in a rendered scene: the holder's pinch point (from its joints) keeps the
+    right answer; a pinch point 15 mm away is refused with the arm named."""
+    from suture_bt.datagen.needle_data import SimScene
+    from suture_bt.kinematics import forward_kinematics
+    from suture_bt.perception.in_hand import JAW_POINT_IN_TIP
+    from suture_bt.perception.needle_localizer import NeedleLocalizer
+    from suture_bt.transforms import invert
+
+    sim = SimScene(960, 540)
+    try:
+        loc = NeedleLocalizer(sim.stereo)
+        for i in range(20):  # the first seeded held scene the localiser answers
+            rng = np.random.default_rng([77, i])
+            s = sim.sampler.sample(rng, scenario="held_psm2", zr=(0.06, 0.1))
+            s = s.__class__(s.scenario, s.T_world_needle, s.q, s.jaw, 1.0, 2.0)
+            sim.apply(s)
+            left, _ = sim.render("left", s, rng)
+            right, _ = sim.render("right", s, rng)
+            T_tip = sim.sampler.bases["psm2"] @ forward_kinematics(s.q["psm2"])
+            pinch = T_tip[:3, :3] @ JAW_POINT_IN_TIP + T_tip[:3, 3]
+            try:
+                est = loc.localize(left, right, priors=[HeldPrior("psm2", pinch, 0.002)])
+                break
+            except NeedleNotFound:
+                continue
+        else:
+            pytest.fail("no seeded held scene localised")
+        T_true = invert(sim.stereo.left.T_world_cam) @ s.T_world_needle
+        pos, ang = pose_errors(est.T_cam_needle, T_true)
+        assert pos < 2.0 and ang < 5.0 and est.fit.prior_misses[0] <= 1.0
+        away = pinch + 0.015 * s.T_world_needle[:3, 2]  # off the needle's plane
+        with pytest.raises(PriorContradicted, match="psm2's pinch point"):
+            loc.localize(left, right, priors=[HeldPrior("psm2", away, 0.002)])
+    finally:
+        sim.close()
