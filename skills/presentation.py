@@ -108,17 +108,18 @@ def choose(
 
 def lifted_first(ctx: TaskContext, arm: ArmHandle, T_goal: np.ndarray) -> list[np.ndarray]:
     """Waypoints to a presentation pose: straight up first (along the phantom's up axis) when
-    the held needle (as believed; else the tip) is lower than ``MIN_CLEARANCE`` above the
-    highest port, so it is not dragged over the tissue or through the ports' planes."""
+    the held needle (as believed; not yet localised: a needle diameter below the jaw) is lower
+    than ``MIN_CLEARANCE`` above the highest port, so it is not dragged through the tissue."""
     up = ctx.phantom.T_world_phantom[:3, 2]
     ports = np.array([p.position for p in ctx.phantom.ports()])
     T_now = arm.commanded_tip_world()
-    low = [T_now[:3, 3]]
     belief = ctx.belief
     if belief is not None and belief.holder == arm.name and belief.T_tip_needle is not None:
         T_needle = T_now @ belief.T_tip_needle  # the held needle hangs below the jaw
         arc = ctx.needle.point_at(np.linspace(ctx.needle.tip_angle, ctx.needle.base_angle, 9))
         low = list(arc @ T_needle[:3, :3].T + T_needle[:3, 3])
+    else:  # not localised yet: it may hang a whole needle diameter below the jaw
+        low = [T_now[:3, 3] - 2.0 * ctx.needle.radius * up]
     rise = MIN_CLEARANCE - float(np.min((np.array(low) @ up)[:, None] - ports @ up))
     if rise <= 0.0:
         return [T_goal]

@@ -191,3 +191,16 @@ def test_a_tip_already_high_goes_straight_to_the_presentation():
     arm = make_arm("psm2")
     goal = candidate_poses(ctx, arm)[0]
     assert lifted_first(ctx, arm, goal) == [goal]
+
+
+def test_a_needle_not_yet_localised_is_assumed_to_hang_a_diameter_below_the_jaw():
+    # At the Task 3 start the jaw is 26 mm above the ports but the needle hangs lower; with no
+    # estimate yet the lift assumes the worst (a dragged needle went 15 mm into the ridge).
+    ctx = make_ctx()
+    arm = make_arm("psm2")
+    goal = candidate_poses(ctx, arm)[0]
+    up_first, _ = lifted_first(ctx, arm, goal)
+    assert clearance(ctx, up_first[:3, 3]) == pytest.approx(
+        MIN_CLEARANCE + 2 * ctx.needle.radius, abs=1e-9
+    )
+

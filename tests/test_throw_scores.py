@@ -133,6 +133,7 @@ def test_windows_and_attempts():
     crossings, entries, windows = four_throws()
     windows[3] = None
     del windows[4]
+    entries = [e for e in entries if e.nearest_port in ("entry1", "entry2")]
     scores = score_throws(crossings, entries, {}, windows)
     assert [s.passed for s in scores] == [True, True, False, False]
     assert [s.failure for s in scores[2:]] == ["not attempted", "not attempted"]
@@ -140,7 +141,24 @@ def test_windows_and_attempts():
     assert not run_passed([])
     # Crossings outside a throw's window do not count for it.
     (s,) = score_throws(crossings, entries, {}, {1: (13.0, 15.0)}, pairs=(1,))
-    assert s.failure == "no entry crossing of entry1"
+    assert s.failure.startswith("no entry crossing of entry1; ")  # (later entries: stabs)
+    assert "after the throw" in s.failure
+
+
+def test_tissue_entered_outside_every_throw_is_charged_to_the_throw_that_follows():
+    crossings, entries, windows = four_throws()
+    preparing = E(2.0, "entry2", 3.4e-3)  # dragged through the tissue while preparing
+    between = E(26.0, "exit2", 1e-3)  # between throws 2 and 3 (window 3 starts at 30)
+    after = E(60.0, "exit4", 0.5e-3)  # after the last throw ended (45)
+    for extra, charged in ((preparing, 1), (between, 3), (after, 4)):
+        scores = score_throws(crossings, [*entries, extra], {}, windows)
+        failed = [s.pair for s in scores if not s.passed]
+        assert failed == [charged], (extra, failed)
+        word = "after" if extra is after else "before"
+        assert f"{word} the throw" in scores[charged - 1].failure
+    # At the throw's own entry port, before its window: not a stab.
+    early = E(29.0, "entry3", 1e-3)
+    assert all(s.passed for s in score_throws(crossings, [*entries, early], {}, windows))
 
 
 def test_stab_distance_is_from_the_throws_own_entry_port_when_ports_are_known():

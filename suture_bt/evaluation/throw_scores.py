@@ -10,7 +10,9 @@ collects them from a world's ground truth.
 A throw i passes when, inside its window, the tip crosses Entry_i inward and then Exit_i
 outward, with a lateral distance ≤ 2.5 mm at each crossing, gets ≥ 5 mm out past the exit, and
 goes into the tissue nowhere but at Entry_i (a tissue entry more than 2.5 mm from Entry_i is a
-stab). Tissue strain over 0.5 mm is reported, not failed.
+stab). A tissue entry outside every throw's window (while preparing, or between throws) is
+charged to the throw that follows it, or to the last throw: nothing the needle does in the
+tissue goes unscored. Tissue strain over 0.5 mm is reported, not failed.
 """
 
 from __future__ import annotations
@@ -95,13 +97,13 @@ def _stab(
     pair: int,
     window: tuple[float, float],
     port_positions: Mapping[str, np.ndarray] | None,
-) -> tuple[float, str] | None:
+) -> tuple[float, str, float] | None:
     """(distance m, port) of the tissue entry in the window farthest from Entry_i, among those
     not at Entry_i; the distance is from Entry_i when its position is known, else from the
-    entry's nearest port (then named). None when every entry was at the port."""
+    entry's nearest port (then named), and its time. None when every entry was at the port."""
     own = f"entry{pair}"
     own_pos = None if port_positions is None else port_positions.get(own)
-    worst: tuple[float, str] | None = None
+    worst: tuple[float, str, float] | None = None
     for e in entries:
         if not _in_window(e.t, window):
             continue
@@ -113,7 +115,7 @@ def _stab(
             d, ref = float(e.distance), f"{e.nearest_port} (nearest port)"
         at_port = d <= PORT_RADIUS and (own_pos is not None or e.nearest_port == own)
         if not at_port and (worst is None or d > worst[0]):
-            worst = (d, ref)
+            worst = (d, ref, float(e.t))
     return worst
 
 
@@ -124,14 +126,17 @@ def score_throw(
     max_strain: Mapping[str, Any],
     window: Window,
     port_positions: Mapping[str, np.ndarray] | None = None,
+    stab_window: Window = None,
 ) -> ThrowScore:
-    """Score one throw from the run's records (see the module docstring for the rules)."""
+    """Score one throw from the run's records (see the module docstring for the rules);
+    ``stab_window`` (default: the throw's window) is where its tissue entries are looked for."""
     if window is None:
         return ThrowScore(pair, False, None, None, None, None, None, None, "not attempted")
     window = (float(window[0]), float(window[1]))
     entry, exit_, exit_first = _pick_crossings(crossings, pair, window)
     strains = [max_strain[p].circle for p in (f"entry{pair}", f"exit{pair}") if p in max_strain]
-    stab = _stab(tissue_entries, pair, window, port_positions)
+    stab_window = window if stab_window is None else stab_window
+    stab = _stab(tissue_entries, pair, stab_window, port_positions)
     reasons = []
     if entry is None:
         reasons.append(f"no entry crossing of entry{pair}")
@@ -148,7 +153,9 @@ def score_throw(
     if exit_ is not None and exit_.tip_out < TIP_OUT_MIN:
         reasons.append(f"tip out {exit_.tip_out * 1e3:.1f} mm < {TIP_OUT_MIN * 1e3:g} mm")
     if stab is not None:
-        reasons.append(f"stab {stab[0] * 1e3:.1f} mm from {stab[1]}")
+        side = "before" if stab[2] < window[0] else "after"
+        when = "" if _in_window(stab[2], window) else f" at t = {stab[2]:.1f} s, {side} the throw"
+        reasons.append(f"stab {stab[0] * 1e3:.1f} mm from {stab[1]}{when}")
     return ThrowScore(
         pair=pair,
         passed=not reasons,
@@ -175,10 +182,32 @@ def score_throws(
     ``port_positions`` (port name → world position), when given, measures stabs from each
     throw's own entry port; without it, from the entry's nearest port.
     """
+    stab_windows = _stab_windows({i: windows.get(i) for i in pairs})
     return [
-        score_throw(i, crossings, tissue_entries, max_strain, windows.get(i), port_positions)
+        score_throw(
+            i,
+            crossings,
+            tissue_entries,
+            max_strain,
+            windows.get(i),
+            port_positions,
+            stab_windows.get(i),
+        )
         for i in pairs
     ]
+
+
+def _stab_windows(windows: Mapping[int, Window]) -> dict[int, tuple[float, float]]:
+    """Each attempted throw answers for the tissue entries from the end of the throw before it
+    (or the run's start) to its own end; the last one also for everything after it."""
+    attempted = sorted(
+        ((float(w[0]), float(w[1]), i) for i, w in windows.items() if w is not None)
+    )
+    out, previous_end = {}, -np.inf
+    for k, (_, end, i) in enumerate(attempted):
+        out[i] = (previous_end, np.inf if k == len(attempted) - 1 else end)
+        previous_end = end
+    return out
 
 
 def run_passed(scores: Sequence[ThrowScore]) -> bool:
