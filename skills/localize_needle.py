@@ -12,14 +12,13 @@ from __future__ import annotations
 
 import numpy as np
 
-from suture_bt.calibration.calibration_pose import offset_box_points
-from suture_bt.kinematics import forward_kinematics
 from suture_bt.perception.in_hand import estimate_in_hand
 from suture_bt.skills import presentation
 from suture_bt.skills.base import Skill, SkillFailure, Waiting
 from suture_bt.skills.context import NeedleNotSeen, NeedleObservation, TaskContext
 from suture_bt.skills.line_of_sight import clear_tip_pose
 from suture_bt.skills.motion import feasible, move_to, together
+from suture_bt.skills.tip_uncertainty import worst_offset_displacement
 
 #: A held needle's wire must pass this close to the holder's pinch point (m) once the arm is
 #: calibrated; before, the margin adds the tip displacement of the largest hidden joint
@@ -135,17 +134,3 @@ class LocalizeNeedle(Skill):
             f"needle {where} at {np.round(1e3 * belief.T_world_needle[:3, 3], 1)} mm "
             f"(spread {obs.angle_std_deg:.2f}°)"
         )
-
-
-def worst_offset_displacement(q: np.ndarray) -> float:
-    """Largest tip displacement (m) a hidden offset within the task's bound can cause at
-    joints ``q`` (the corners of the bound box; the tip moves monotonically between them)."""
-    q = np.asarray(q, dtype=float)
-    tip = forward_kinematics(q)[:3, 3]
-    worst = 0.0
-    for dq in offset_box_points(2):
-        q2 = q.copy()
-        q2[:3] += dq
-        worst = max(worst, float(np.linalg.norm(forward_kinematics(q2)[:3, 3] - tip)))
-    return worst
-

@@ -20,6 +20,7 @@ from suture_bt.planning import to_base
 from suture_bt.skills.context import ArmHandle, TaskContext
 from suture_bt.skills.grasps import GRASP_DEPTH
 from suture_bt.skills.motion import feasible
+from suture_bt.skills.tip_uncertainty import tip_margin
 from suture_bt.transforms import make_transform
 
 #: Distance of the pinch point in front of the left camera (m, along its optical axis).
@@ -109,7 +110,8 @@ def choose(
 def lifted_first(ctx: TaskContext, arm: ArmHandle, T_goal: np.ndarray) -> list[np.ndarray]:
     """Waypoints to a presentation pose: straight up first (along the phantom's up axis) when
     the held needle (as believed; not yet localised: a needle diameter below the jaw) is lower
-    than ``MIN_CLEARANCE`` above the highest port, so it is not dragged through the tissue."""
+    than ``MIN_CLEARANCE`` (plus, uncalibrated, the tip's worst offset displacement) above the
+    highest port, so it is not dragged through the tissue on the way."""
     up = ctx.phantom.T_world_phantom[:3, 2]
     ports = np.array([p.position for p in ctx.phantom.ports()])
     T_now = arm.commanded_tip_world()
@@ -120,10 +122,15 @@ def lifted_first(ctx: TaskContext, arm: ArmHandle, T_goal: np.ndarray) -> list[n
         low = list(arc @ T_needle[:3, :3].T + T_needle[:3, 3])
     else:  # not localised yet: it may hang a whole needle diameter below the jaw
         low = [T_now[:3, 3] - 2.0 * ctx.needle.radius * up]
-    rise = MIN_CLEARANCE - float(np.min((np.array(low) @ up)[:, None] - ports @ up))
+    # An uncalibrated arm's tip may be off by what the task's offset bound allows.
+    rise = MIN_CLEARANCE + tip_margin(arm)
+    rise -= float(np.min((np.array(low) @ up)[:, None] - ports @ up))
     if rise <= 0.0:
         return [T_goal]
-    T_up = T_now.copy()
-    T_up[:3, 3] += rise * up
-    return [T_up, T_goal] if not feasible(arm, [T_up]) else [T_goal]
+    for part in (1.0, 0.75, 0.5, 0.25):  # as high as the arm can, if not all the way
+        T_up = T_now.copy()
+        T_up[:3, 3] += part * rise * up
+        if not feasible(arm, [T_up]):
+            return [T_up, T_goal]
+    return [T_goal]
 

@@ -21,6 +21,7 @@ from suture_bt.skills.presentation import (
     lifted_first,
     presentation_point,
 )
+from suture_bt.skills.tip_uncertainty import worst_offset_displacement
 from suture_bt.transforms import make_transform, pose_to_transform
 
 #: The scene's initial joints (sim/default_scene.yaml).
@@ -171,6 +172,7 @@ def test_candidate_poses_do_not_command_the_arm():
 def test_a_low_tip_rises_straight_up_before_it_is_presented(phantom):
     ctx = make_ctx(PHANTOMS[phantom])
     arm = make_arm("psm2")  # at the Task 3 start pose, the needle 10-16 mm above the entries
+    arm.calibrated = True  # (the margin of an uncalibrated arm: see below)
     ctx.belief = NeedleBelief(np.eye(4), 0.0, "test", "psm2", hand(ctx.needle, np.deg2rad(155)))
     goal = candidate_poses(ctx, arm)[0]
     up_first, final = lifted_first(ctx, arm, goal)
@@ -187,7 +189,7 @@ def test_a_low_tip_rises_straight_up_before_it_is_presented(phantom):
 
 
 def test_a_tip_already_high_goes_straight_to_the_presentation():
-    ctx = make_ctx(make_transform(None, (0.0, 0.0, -0.03)))  # the phantom 30 mm lower
+    ctx = make_ctx(make_transform(None, (0.0, 0.0, -0.06)))  # the phantom 60 mm lower
     arm = make_arm("psm2")
     goal = candidate_poses(ctx, arm)[0]
     assert lifted_first(ctx, arm, goal) == [goal]
@@ -198,9 +200,24 @@ def test_a_needle_not_yet_localised_is_assumed_to_hang_a_diameter_below_the_jaw(
     # estimate yet the lift assumes the worst (a dragged needle went 15 mm into the ridge).
     ctx = make_ctx()
     arm = make_arm("psm2")
+    arm.calibrated = True
     goal = candidate_poses(ctx, arm)[0]
     up_first, _ = lifted_first(ctx, arm, goal)
     assert clearance(ctx, up_first[:3, 3]) == pytest.approx(
         MIN_CLEARANCE + 2 * ctx.needle.radius, abs=1e-9
     )
+
+
+def test_an_uncalibrated_arm_rises_further_by_its_worst_offset_displacement():
+    ctx = make_ctx()
+    calibrated, uncalibrated = make_arm("psm2"), make_arm("psm2")
+    calibrated.calibrated = True
+    goal = candidate_poses(ctx, calibrated)[0]
+    high = lifted_first(ctx, uncalibrated, goal)[0]
+    low = lifted_first(ctx, calibrated, goal)[0]
+    extra = clearance(ctx, high[:3, 3]) - clearance(ctx, low[:3, 3])
+    margin = worst_offset_displacement(uncalibrated.servo.estimated_jp())
+    assert 0.010 < margin < 0.025  # the SRC bound at the start pose: about 18 mm
+    # As high as the arm can go: all of the margin, or a quarter-step short of it.
+    assert extra == pytest.approx(margin, abs=1e-9) or 0.0 < extra < margin
 

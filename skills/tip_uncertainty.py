@@ -1,0 +1,31 @@
+"""How far an arm's tip may be from where its kinematics put it, before calibration.
+
+The hidden joint offset is bounded by the task (SRC: 5°, 5°, 5 mm on joints 1-3); until the
+arm is calibrated, its tip may be anywhere the bound allows. Used wherever a margin must cover
+that: the held-by test of a localised needle, the clearance kept above the tissue.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from suture_bt.calibration.calibration_pose import offset_box_points
+from suture_bt.kinematics import forward_kinematics
+
+
+def worst_offset_displacement(q: np.ndarray) -> float:
+    """Largest tip displacement (m) a hidden offset within the task's bound can cause at
+    joints ``q`` (the corners of the bound box; the tip moves monotonically between them)."""
+    q = np.asarray(q, dtype=float)
+    tip = forward_kinematics(q)[:3, 3]
+    worst = 0.0
+    for dq in offset_box_points(2):
+        q2 = q.copy()
+        q2[:3] += dq
+        worst = max(worst, float(np.linalg.norm(forward_kinematics(q2)[:3, 3] - tip)))
+    return worst
+
+
+def tip_margin(arm) -> float:
+    """0 for a calibrated arm, else the worst displacement at its present joints (m)."""
+    return 0.0 if arm.calibrated else worst_offset_displacement(arm.servo.estimated_jp())
