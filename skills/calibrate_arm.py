@@ -24,6 +24,10 @@ MAX_LOST_FRAMES = 3
 FRAME_BACK_OFF = 0.1
 
 
+#: Joint speed of the move to the calibration pose (rad/s; the insertion joint a tenth in
+#: m/s; smoothstep, so the peak is 1.5 times this): the arm settles before the image is taken.
+APPROACH_SPEED = 1.0
+
 class CalibrateArm(Skill):
     """Calibrate ``arm`` (psm1 or psm2)."""
 
@@ -39,7 +43,7 @@ class CalibrateArm(Skill):
         if ctx.belief is not None and ctx.belief.holder == self.arm_name:
             raise SkillFailure(f"{self.arm_name} holds the needle: calibration needs an empty jaw")
         self.say(f"calibrating {self.arm_name}: moving to the calibration pose")
-        cal = Calibration(handle.arm, ctx.camera, handle.servo)
+        cal = Calibration(handle.arm, ctx.camera, handle.servo, speed=APPROACH_SPEED)
         cal.start()
         lost: list[str] = []
         while cal.phase not in ("done", "failed"):

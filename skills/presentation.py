@@ -27,6 +27,9 @@ from suture_bt.transforms import make_transform
 DEPTH = 0.062
 #: Smallest height of the pinch point above every port, along the phantom's up axis (m).
 MIN_CLEARANCE = 0.02
+#: Smallest height of the held needle's lowest point above the highest port when presented
+#: (m): a presentation that would hang it lower is tried last.
+MIN_NEEDLE_CLEARANCE = 0.004
 #: Image-plane offsets (camera x, y; m) tried for the pinch point, nearest the centre first.
 OFFSETS = [(0.0, -0.004 * k) for k in range(0, 8)]
 #: Jaw-axis directions in the camera frame (x toward the arm's own side is s = +1).
@@ -85,9 +88,32 @@ def candidate_poses(ctx: TaskContext, arm: ArmHandle) -> list[np.ndarray]:
             except UnreachablePoseError:
                 continue
             bend = abs(q[4]) + abs(q[5]) + 0.3 * abs(q[3] - q_now[3])
-            scored.append((bend, len(scored), T))
-    scored.sort(key=lambda c: (c[0], c[1]))
-    return [T for _, _, T in scored]
+            clear = needle_clearance(ctx, arm, T)
+            low = clear < MIN_NEEDLE_CLEARANCE
+            # Among those that may hang low, higher first, by 5 mm bands; then least bend.
+            band = -np.floor(clear / 0.005) if low else 0.0
+            scored.append((low, band, bend, len(scored), T))
+    # Poses whose held needle may hang into the tissue go last, however little they bend.
+    scored.sort(key=lambda c: c[:4])
+    return [T for *_, T in scored]
+
+
+def needle_clearance(ctx: TaskContext, arm: ArmHandle, T_tip: np.ndarray) -> float:
+    """Height (m) of the held needle's lowest point above the highest port, with the jaw at
+    ``T_tip`` (less the tip margin of an uncalibrated arm). Known in-hand transform: its arc;
+    unknown: the worst of both hands — the jaw holds the wire along tip x, so the arc's centre
+    lies one radius along ±tip y and the needle may reach a radius below that."""
+    up = ctx.phantom.T_world_phantom[:3, 2]
+    top = max(float(p.position @ up) for p in ctx.phantom.ports())
+    b = ctx.belief
+    r = ctx.needle.radius
+    if b is not None and b.holder == arm.name and b.T_tip_needle is not None:
+        T_needle = T_tip @ b.T_tip_needle
+        arc = ctx.needle.point_at(np.linspace(ctx.needle.tip_angle, ctx.needle.base_angle, 9))
+        lowest = float(np.min((arc @ T_needle[:3, :3].T + T_needle[:3, 3]) @ up))
+    else:
+        lowest = float(T_tip[:3, 3] @ up) - r * abs(float(T_tip[:3, 1] @ up)) - r
+    return lowest - top - tip_margin(arm)
 
 
 def choose(

@@ -17,8 +17,10 @@ from suture_bt.skills.presentation import (
     DEPTH,
     DIRECTIONS,
     MIN_CLEARANCE,
+    MIN_NEEDLE_CLEARANCE,
     candidate_poses,
     lifted_first,
+    needle_clearance,
     presentation_point,
 )
 from suture_bt.skills.tip_uncertainty import worst_offset_displacement
@@ -151,6 +153,17 @@ def test_first_candidate_faces_the_camera_within_50deg(phantom):
     T = candidate_poses(make_ctx(PHANTOMS[phantom]), make_arm("psm2"))[0]
     axis = CAMERA.model.left.T_world_cam[:3, 2]
     assert np.rad2deg(np.arccos(np.clip(T[:3, 2] @ axis, -1, 1))) <= 50.0
+
+
+def test_a_presentation_that_would_hang_the_needle_into_the_tissue_goes_last():
+    ctx = make_ctx(make_transform(None, (0.0, 0.0, 0.008)))  # the phantom 8 mm higher
+    arm = make_arm("psm2")
+    arm.calibrated = True
+    ctx.belief = NeedleBelief(np.eye(4), 0.0, "test", "psm2", hand(ctx.needle, np.deg2rad(65)))
+    clear = [needle_clearance(ctx, arm, T) for T in candidate_poses(ctx, arm)]
+    ok = [c >= MIN_NEEDLE_CLEARANCE for c in clear]
+    assert any(ok) and not all(ok)
+    assert all(a >= b for a, b in zip(ok, ok[1:], strict=False))  # every clear one first
 
 
 def test_some_candidate_faces_the_camera_within_50deg():
