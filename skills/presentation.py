@@ -74,6 +74,8 @@ def candidate_poses(ctx: TaskContext, arm: ArmHandle) -> list[np.ndarray]:
     s = _side(ctx, arm)
     base = arm.base_frame()
     q_now = arm.servo.setpoint_jp()
+    b = ctx.belief
+    unknown = b is None or b.holder != arm.name or b.T_tip_needle is None
     scored = []
     for d in DIRECTIONS:
         z = cam_R @ (np.array([s * d[0], d[1], d[2]]) / np.linalg.norm(d))
@@ -88,12 +90,15 @@ def candidate_poses(ctx: TaskContext, arm: ArmHandle) -> list[np.ndarray]:
             except UnreachablePoseError:
                 continue
             bend = abs(q[4]) + abs(q[5]) + 0.3 * abs(q[3] - q_now[3])
-            clear = needle_clearance(ctx, arm, T)
-            low = clear < MIN_NEEDLE_CLEARANCE
-            # Among those that may hang low, higher first, by 5 mm bands; then least bend.
-            band = -np.floor(clear / 0.005) if low else 0.0
+            low, band = False, 0.0
+            if unknown:  # among those that may hang low: higher first, by 5 mm bands
+                clear = needle_clearance(ctx, arm, T)
+                low = clear < MIN_NEEDLE_CLEARANCE
+                band = -np.floor(clear / 0.005) if low else 0.0
             scored.append((low, band, bend, len(scored), T))
-    # Poses whose held needle may hang into the tissue go last, however little they bend.
+    # A needle not localised yet: poses that may hang it into the tissue go last, however
+    # little they bend (once its in-hand pose is known, least bend decides, as the views of
+    # the handovers were chosen for).
     scored.sort(key=lambda c: c[:4])
     return [T for *_, T in scored]
 
