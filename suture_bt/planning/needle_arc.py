@@ -25,9 +25,6 @@ from suture_bt.transforms import invert
 
 #: SRC throw rule: at least this much tip out past the exit (DESIGN.md §5).
 MIN_TIP_OUT = 0.005
-#: The insertion drives the tip this much further (m): the arm's in-hand estimate can be a
-#: couple of millimetres off along the arc, and the tip must still stand 5 mm out.
-TIP_OUT_MARGIN = 0.003
 
 
 class NeedleArcError(ValueError):
@@ -233,7 +230,7 @@ def plan_needle_arc(
     exit: Port,  # noqa: A002 - the port's role
     needle: NeedleModel | None = None,
     min_tip_out: float = MIN_TIP_OUT,
-    margin: float = TIP_OUT_MARGIN,
+    margin: float = 0.001,
     extraction_clearance: float = 0.002,
 ) -> NeedleArc:
     """Plan the needle circle through ``entry`` and ``exit`` (world port frames).
