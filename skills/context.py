@@ -18,6 +18,8 @@ from suture_bt.control import PIServo
 from suture_bt.geometry import NeedleModel, PhantomModel
 from suture_bt.interfaces import Clock, PSMInterface, StereoCameraInterface
 from suture_bt.kinematics import forward_kinematics
+from suture_bt.planning import NeedleArc, NeedleArcError, plan_needle_arc
+from suture_bt.skills.base import SkillFailure
 from suture_bt.transforms import invert
 
 
@@ -121,6 +123,21 @@ class TaskContext:
             return self.arms[name]
         except KeyError:
             raise KeyError(f"no arm named {name!r} (have {sorted(self.arms)})") from None
+
+    def held_by(self, arm: str, where: str) -> NeedleBelief:
+        """The belief, when it has ``arm`` holding the needle with a known in-hand pose; else
+        SkillFailure (a skill that needs the needle in that jaw stops before it moves)."""
+        b = self.belief
+        if b is None or b.holder != arm or b.T_tip_needle is None:
+            raise SkillFailure(f"{where}: {arm} is not known to hold the needle")
+        return b
+
+    def plan(self, pair: int, where: str) -> NeedleArc:
+        """The planned needle circle through ``pair``; SkillFailure with the planner's reason."""
+        try:
+            return plan_needle_arc(*self.phantom.pair(pair), self.needle)
+        except NeedleArcError as e:
+            raise SkillFailure(f"{where}: {e.reason}") from None
 
     def predicted_needle(self) -> np.ndarray | None:
         """Where the needle is now if it moved with its holder since the last estimate."""

@@ -11,7 +11,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from suture_bt.planning import NeedleArcError, gripper_poses, plan_needle_arc
+from suture_bt.planning import gripper_poses
 from suture_bt.skills import checks
 from suture_bt.skills.base import Skill, SkillFailure, Waiting
 from suture_bt.skills.context import NeedleNotSeen, TaskContext
@@ -38,13 +38,9 @@ class Extract(Skill):
         ctx = self.context
         puller, inserter = ctx.arm(self.puller), ctx.arm(self.inserter)
         where = f"pair {self.pair}"
-        if ctx.belief is None or ctx.belief.holder != self.inserter:
-            raise SkillFailure(f"{where}: {self.inserter} is not known to hold the needle")
-        entry, exit_ = ctx.phantom.pair(self.pair)
-        try:
-            arc = plan_needle_arc(entry, exit_, ctx.needle)
-        except NeedleArcError as e:
-            raise SkillFailure(f"{where}: {e.reason}") from None
+        ctx.held_by(self.inserter, where)
+        _, exit_ = ctx.phantom.pair(self.pair)
+        arc = ctx.plan(self.pair, where)
         T_needle = ctx.predicted_needle()
         goal = tip_goal(T_needle, pulling_hand(ctx.needle))
         self.say(f"{where}: {self.puller} takes the emerged tip")

@@ -15,7 +15,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from suture_bt.planning import NeedleArcError, gripper_poses, plan_needle_arc
+from suture_bt.planning import NeedleArcError, gripper_poses
 from suture_bt.skills import checks
 from suture_bt.skills.base import Skill, SkillFailure, Waiting
 from suture_bt.skills.context import NeedleNotSeen, TaskContext
@@ -52,13 +52,10 @@ class Insert(Skill):
         ctx = self.context
         arm = ctx.arm(self.arm_name)
         where = f"pair {self.pair}"
-        belief = ctx.belief
-        if belief is None or belief.holder != self.arm_name or belief.T_tip_needle is None:
-            raise SkillFailure(f"{where}: {self.arm_name} is not known to hold the needle")
-        T_gn = belief.T_tip_needle
+        T_gn = ctx.held_by(self.arm_name, where).T_tip_needle
         entry, exit_ = ctx.phantom.pair(self.pair)
+        arc = ctx.plan(self.pair, where)
         try:
-            arc = plan_needle_arc(entry, exit_, ctx.needle)
             arc.check_grasp(T_gn, JAW_CLEARANCE)
         except NeedleArcError as e:
             raise SkillFailure(f"{where}: {e.reason}") from None

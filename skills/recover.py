@@ -13,7 +13,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from suture_bt.planning import NeedleArcError, gripper_poses, plan_needle_arc
+from suture_bt.planning import gripper_poses
 from suture_bt.skills.base import Skill, SkillFailure, Waiting
 from suture_bt.skills.context import TaskContext
 from suture_bt.skills.grasps import backed_off
@@ -64,14 +64,9 @@ class BackOut(Skill):
         ctx = self.context
         arm = ctx.arm(self.arm_name)
         where = f"pair {self.pair}"
-        b = ctx.belief
-        if b is None or b.holder != self.arm_name or b.T_tip_needle is None:
-            raise SkillFailure(f"{where}: {self.arm_name} is not known to hold the needle")
-        entry, exit_ = ctx.phantom.pair(self.pair)
-        try:
-            arc = plan_needle_arc(entry, exit_, ctx.needle)
-        except NeedleArcError as e:
-            raise SkillFailure(f"{where}: {e.reason}") from None
+        b = ctx.held_by(self.arm_name, where)
+        entry, _ = ctx.phantom.pair(self.pair)
+        arc = ctx.plan(self.pair, where)
         T_gn = b.T_tip_needle if self.T_tip_needle is None else self.T_tip_needle
         T_now = arm.commanded_tip_world() @ T_gn
         phi, turn = self._sweep_angle(arc, T_now)

@@ -12,7 +12,6 @@ from __future__ import annotations
 
 import numpy as np
 
-from suture_bt.planning import NeedleArcError, plan_needle_arc
 from suture_bt.skills.base import Skill, SkillFailure, Waiting
 from suture_bt.skills.context import TaskContext
 from suture_bt.skills.grasps import backed_off, pulling_hand, tip_goal
@@ -38,10 +37,7 @@ class StandBy(Skill):
     def standby_pose(self) -> np.ndarray:
         """World tip pose to wait at; SkillFailure when the pair cannot be planned."""
         ctx = self.context
-        try:
-            arc = plan_needle_arc(*ctx.phantom.pair(self.pair), ctx.needle)
-        except NeedleArcError as e:
-            raise SkillFailure(f"pair {self.pair}: {e.reason}") from None
+        arc = ctx.plan(self.pair, f"pair {self.pair}")
         T_end = arc.needle_pose(arc.insert_end_angle)
         T = backed_off(tip_goal(T_end, pulling_hand(ctx.needle)), STANDBY_DISTANCE)
         # Out of the cameras' sight of the emerging tip: the insertion confirms from images.
