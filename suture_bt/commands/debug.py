@@ -11,37 +11,22 @@ from __future__ import annotations
 import sys
 from pathlib import Path
 
+from suture_bt.commands.session_args import add_session_arguments
 from suture_bt.trees import TREE_NAMES
 
 
 def register(subparsers) -> None:
     p = subparsers.add_parser("debug", help="step a tree tick by tick (breakpoints, tree, bb)")
-    p.add_argument(
-        "tree",
-        nargs="?",
-        default="multi_throw",
-        metavar="TREE",
-        help=f"tree to debug: {', '.join(TREE_NAMES)} (default multi_throw)",
+    add_session_arguments(
+        p,
+        "debug",
+        "out/debug",
+        "ABLATION: feed ground truth to the skills ('world' then shows the true needle)",
     )
-    p.add_argument("--scene", metavar="FILE", help="scene YAML (default: the SRC Task 3 start)")
-    p.add_argument("--seed", type=int, metavar="N", help="scene seed (random offsets, noise)")
     p.add_argument(
         "--commands",
         metavar="FILE",
         help="run the debugger commands in FILE ('-': stdin) instead of prompting",
-    )
-    p.add_argument("--out", metavar="DIR", default="out/debug", help="where results go")
-    p.add_argument(
-        "--rerun",
-        choices=("save", "spawn", "off"),
-        default="save",
-        help="record to DIR/run.rrd (save, default), also stream to a viewer (spawn), or not",
-    )
-    p.add_argument("--policy", choices=("stop", "continue"), default="stop")
-    p.add_argument(
-        "--oracle",
-        action="store_true",
-        help="ABLATION: feed ground truth to the skills ('world' then shows the true needle)",
     )
     p.set_defaults(func=run)
 

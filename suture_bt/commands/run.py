@@ -11,43 +11,14 @@ from __future__ import annotations
 import sys
 from pathlib import Path
 
+from suture_bt.commands.session_args import add_session_arguments
 from suture_bt.trees import TREE_NAMES
 
 
 def register(subparsers) -> None:
     p = subparsers.add_parser("run", help="run a suture tree headless (default: the full suture)")
-    p.add_argument(
-        "tree",
-        nargs="?",
-        default="multi_throw",
-        metavar="TREE",
-        help=f"tree to run: {', '.join(TREE_NAMES)} (default multi_throw)",
-    )
-    p.add_argument(
-        "--scene",
-        metavar="FILE",
-        help="scene YAML (default: the embedded SRC scene at the Task 3 start, "
-        "needle in PSM2's jaw)",
-    )
-    p.add_argument("--seed", type=int, metavar="N", help="scene seed (random offsets, noise)")
-    p.add_argument("--out", metavar="DIR", default="out/run", help="where results go")
-    p.add_argument(
-        "--rerun",
-        choices=("save", "spawn", "off"),
-        default="save",
-        help="record the run to DIR/run.rrd (save, default), also stream it to a viewer "
-        "(spawn), or not (off)",
-    )
-    p.add_argument(
-        "--policy",
-        choices=("stop", "continue"),
-        default="stop",
-        help="after a failed throw: end the run (stop) or go on (continue)",
-    )
-    p.add_argument(
-        "--oracle",
-        action="store_true",
-        help="ABLATION: feed ground truth (needle pose, offsets) to the skills",
+    add_session_arguments(
+        p, "run", "out/run", "ABLATION: feed ground truth (needle pose, offsets) to the skills"
     )
     p.set_defaults(func=run)
 
