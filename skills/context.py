@@ -73,12 +73,21 @@ class NeedleSensor(Protocol):
     """Capture and localise the needle; ``previous`` (world pose) warm-starts the fit."""
 
     def observe(
-        self, previous: np.ndarray | None = None, prior_checked: bool = False
+        self,
+        previous: np.ndarray | None = None,
+        prior_checked: bool = False,
+        holder: tuple[str, np.ndarray] | None = None,
+        holder_tolerance: float = 0.004,
     ) -> NeedleObservation: ...
 
     def support(self, T_world_needle: np.ndarray, angles: np.ndarray) -> tuple[float, float]:
         """Share (left, right) of the arc at ``angles`` of a predicted pose that the last
         frame shows as needle."""
+        ...
+
+    def hits(self, T_world_needle: np.ndarray, angles: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """Per sample of the arc at ``angles`` of a predicted pose: shown as needle (left,
+        right)."""
         ...
 
 

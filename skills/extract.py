@@ -62,8 +62,10 @@ class Extract(Skill):
         ctx.belief.T_tip_needle = np.linalg.inv(puller.tip_world()) @ T_needle
         T_gn = ctx.belief.T_tip_needle.copy()
         self.say(f"{where}: pulling the needle through {exit_.name}")
-        # Continue the circle from where the needle is now (the seen pose's sweep angle).
-        sweep = gripper_poses(arc.extraction(**SWEEP), T_gn)
+        # Continue the circle from where the needle is now (its sweep angle: the insertion
+        # may have driven on past the planned end).
+        phi, _ = arc.sweep_angle_of(T_needle[:3, :3])
+        sweep = gripper_poses(arc.extraction(start_angle=phi, **SWEEP), T_gn)
         yield from follow_poses(ctx.clock, puller, sweep, f"{where}: pull the needle through")
         T_up = puller.commanded_tip_world()
         T_up[:3, 3] += LIFT * exit_.normal

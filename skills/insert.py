@@ -18,18 +18,24 @@ import numpy as np
 from suture_bt.planning import NeedleArcError, gripper_poses
 from suture_bt.skills import checks
 from suture_bt.skills.base import Skill, SkillFailure, Waiting
-from suture_bt.skills.context import NeedleNotSeen, TaskContext
+from suture_bt.skills.context import NeedleNotSeen, NeedleObservation, TaskContext
 from suture_bt.skills.grasps import JAW_CLEARANCE
 from suture_bt.skills.motion import FINE, follow_poses, move_to, wait
-from suture_bt.transforms import rotation_angle
+from suture_bt.transforms import make_transform, rotation_angle, rpy_to_matrix
 
 #: The sweep starts with the tip this far (arc length) before the entry, and the approach
 #: comes down to it along the entry normal from this height (m).
 PRE_ARC, LIFT = 0.006, 0.010
 #: Needle sweep limits (rad/s, rad/s²): the tip moves at up to 10 mm/s.
 SWEEP = {"angular_speed": 1.0, "angular_acc": 5.0}
-#: Looks at the emerged tip before giving up.
-CONFIRM_LOOKS = 2
+#: Looks at the emerged tip before giving up (one may follow a drive-on).
+CONFIRM_LOOKS = 3
+#: The tip is read along the arc within this turn of the in-hand estimate (deg); the circle
+#: past a reading's tip (deg of arc beyond it) must show no metal.
+SCAN_DEG, BEYOND_DEG = 30.0, (3.0, 15.0)
+#: A reading short of the exit rule is driven on by at least ``DRIVE_ON_DEG`` (or to the
+#: planned end), as far as its grasp allows, when that leaves ``MIN_DRIVE_ON_DEG`` to go.
+DRIVE_ON_DEG, MIN_DRIVE_ON_DEG = 8.0, 1.0
 #: A needle this close to the sweep's end pose (m, deg) is already inserted; the back-off
 #: before looking again (s).
 AT_END_M, AT_END_DEG = 0.003, 10.0
@@ -103,7 +109,9 @@ class Insert(Skill):
 
     def _confirm(self, arm, exit_) -> Waiting:
         """From a fresh frame: the localiser's answer if it agrees with the arm's prediction,
-        else the frame must show metal along the predicted emerged piece and none past it."""
+        else the tip read from the frame along the predicted circle (:meth:`_tip_reading`).
+        A reading short of the exit rule is driven on along the arc as far as its grasp
+        allows, and looked at again."""
         ctx = self.context
         reasons = []
         for _ in range(CONFIRM_LOOKS):
@@ -115,44 +123,94 @@ class Insert(Skill):
                     raise NeedleNotSeen(f"answer disagrees with the arm: {detail}")
             except NeedleNotSeen as e:
                 reasons.append(e.reason)
-                seen = self._evidence(predicted, exit_)
-                if seen is not None:
-                    ctx.belief.T_world_needle = predicted
-                    ctx.belief.stamp, ctx.belief.source = (
-                        ctx.clock.now(),
-                        "predicted, image-checked",
-                    )
-                    yield from self._judge(predicted, exit_, "predicted pose, " + seen)
-                    return
-                yield
-                continue
+                reading = self._tip_reading(predicted, exit_)
+                if reading is None:
+                    reasons.append("no tip seen along the predicted arc")
+                    yield
+                    continue
+                T_seen, how = reading
+                ctx.believe(
+                    NeedleObservation(T_seen, ctx.clock.now(), 0.0, 0.0, "image-read tip"),
+                    self.arm_name,
+                )
+                if (yield from self._drive_on(arm, T_seen, exit_)):
+                    continue  # look at where the needle is now
+                yield from self._judge(T_seen, exit_, how)
+                return
             ctx.believe(obs, self.arm_name)
             yield from self._judge(obs.T_world_needle, exit_, "localised")
             return
         raise SkillFailure(f"pair {self.pair}: emerged tip not confirmed: {'; '.join(reasons)}")
 
-    def _evidence(self, predicted: np.ndarray, exit_) -> str | None:
-        """'' style summary when the last frame shows the predicted emerged tip, else None."""
+    def _tip_reading(self, predicted: np.ndarray, exit_) -> tuple[np.ndarray, str] | None:
+        """The needle on the predicted circle turned along it to where the last frame shows
+        the tip: the least advanced turn (within ``SCAN_DEG``) whose emerged piece is seen as
+        metal and whose circle continued past the tip is not. The in-hand estimate's turn
+        along the arc is its least certain part (an end may have been hidden when it was made),
+        and the least advanced reading also puts the jaws nearest the entry. None: no turn
+        fits (the frame shows no emerged tip, or was lost)."""
         needle = self.context.needle
-        ok, _, numbers = checks.tip_out_past_exit(predicted, needle, exit_)
-        out = numbers.get("tip_out_mm", 0.0) * 1e-3
-        if out < checks.MIN_TIP_OUT * 0.5:
-            return None
-        # The piece in front of the exit surface (1 mm kept clear of it), and the circle
-        # continued past the tip, where no needle must be seen.
-        emerged = needle.tip_angle + np.linspace(0.0, (out - 0.001) / needle.radius, 12)
-        # (from 10°, 1.8 mm, past the predicted tip: the in-hand estimate may be a few
-        # degrees off along the circle, and the real tip then stands that much further out)
-        beyond = needle.tip_angle - np.deg2rad(np.linspace(10.0, 22.0, 8))
+        step = np.deg2rad(0.5)
+        grid = needle.tip_angle + np.arange(
+            np.deg2rad(-SCAN_DEG - BEYOND_DEG[1]), np.deg2rad(SCAN_DEG + 90.0), step
+        )
         try:
-            on = min(self.context.sensor.support(predicted, emerged))
-            off = max(self.context.sensor.support(predicted, beyond))
-        except NeedleNotSeen:  # no frame to look in (the capture was lost)
+            left, right = self.context.sensor.hits(predicted, grid)
+        except NeedleNotSeen:
             return None
-        self.report["evidence"] = {"emerged_on_metal": on, "beyond_on_metal": off}
-        if on >= 0.75 and off <= 0.25:
-            return f"tip seen on {100 * on:.0f} % of the emerged piece, {100 * off:.0f} % past it"
+
+        def share(angles: np.ndarray) -> float:
+            i = np.clip(np.rint((angles - grid[0]) / step).astype(int), 0, len(grid) - 1)
+            return min(float(left[i].mean()), float(right[i].mean()))
+
+        for turn in np.deg2rad(np.arange(-SCAN_DEG, SCAN_DEG + 0.01, 1.0)):
+            # advanced by ``turn`` along the sweep (which turns the needle about its own −z)
+            T = predicted @ make_transform(rpy_to_matrix((0.0, 0.0, -turn)))
+            out = self._tip_out(T, exit_)
+            if out < checks.MIN_TIP_OUT * 0.5:
+                continue
+            # The piece in front of the exit surface (1 mm kept clear of it), and the circle
+            # continued past the tip, in the predicted needle's angles.
+            emerged = needle.tip_angle - turn + np.linspace(0.0, (out - 0.001) / needle.radius, 12)
+            beyond = needle.tip_angle - turn - np.deg2rad(np.linspace(*BEYOND_DEG, 8))
+            on, off = share(emerged), share(beyond)
+            if on >= 0.75 and off <= 0.25:
+                self.report["evidence"] = {
+                    "turn_deg": float(np.rad2deg(turn)),
+                    "emerged_on_metal": on,
+                    "beyond_on_metal": off,
+                }
+                return T, (
+                    f"tip read {np.rad2deg(turn):+.0f}° along the arc from the in-hand estimate: "
+                    f"{100 * on:.0f} % of its emerged piece seen, {100 * off:.0f} % past it"
+                )
         return None
+
+    def _tip_out(self, T_world_needle: np.ndarray, exit_) -> float:
+        """Tip out past the exit (m) of a needle pose, 0 when it does not cross the exit."""
+        _, _, numbers = checks.tip_out_past_exit(T_world_needle, self.context.needle, exit_)
+        return 1e-3 * numbers.get("tip_out_mm", 0.0)
+
+    def _drive_on(self, arm, T_seen: np.ndarray, exit_) -> Waiting:
+        """Sweep on along the arc to the planned end when the reading's tip is short of the
+        exit rule and its grasp leaves room (once per insertion); True if the needle moved."""
+        ok, _, _ = checks.tip_out_past_exit(T_seen, self.context.needle, exit_)
+        if ok or "driven_on_deg" in self.report:
+            return False
+        arc = self.arc
+        T_gn = self.context.belief.T_tip_needle
+        phi, _ = arc.sweep_angle_of(T_seen[:3, :3])
+        end = max(arc.insert_end_angle, phi + np.deg2rad(DRIVE_ON_DEG))
+        end = min(end, arc.grasp_limit_angle(T_gn, JAW_CLEARANCE))
+        if end - phi < np.deg2rad(MIN_DRIVE_ON_DEG):
+            return False
+        self.report["driven_on_deg"] = float(np.rad2deg(end - phi))
+        self.say(
+            f"pair {self.pair}: tip short, driving on {np.rad2deg(end - phi):.1f}° along the arc"
+        )
+        on = gripper_poses(arc.sweep(phi, end, **SWEEP), T_gn)
+        yield from follow_poses(self.context.clock, arm, on, f"pair {self.pair}: drive on")
+        return True
 
     def _judge(self, T_world_needle: np.ndarray, exit_, how: str) -> Waiting:
         ok, detail, numbers = checks.tip_out_past_exit(T_world_needle, self.context.needle, exit_)

@@ -21,7 +21,7 @@ from __future__ import annotations
 import numpy as np
 
 from suture_bt.interfaces import FrameLost, StereoCameraInterface
-from suture_bt.perception.arc_evidence import arc_support
+from suture_bt.perception.arc_evidence import arc_hits
 from suture_bt.perception.in_hand import JAW_POINT_IN_TIP
 from suture_bt.perception.needle_localizer import NeedleLocalizer
 from suture_bt.perception.needle_prior import HeldPrior, NeedlePrior, PredictedPosePrior
@@ -158,9 +158,14 @@ class VisionNeedleSensor:
 
     def support(self, T_world_needle: np.ndarray, angles: np.ndarray) -> tuple[float, float]:
         """Share of the arc at ``angles`` of a predicted pose seen as metal in the last frame."""
+        left, right = self.hits(T_world_needle, angles)
+        return tuple(float(h.mean()) if len(h) else 0.0 for h in (left, right))
+
+    def hits(self, T_world_needle: np.ndarray, angles: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """Per sample of the arc at ``angles`` of a predicted pose: seen as metal (left, right)."""
         if self.last_frame is None:
             raise NeedleNotSeen("no frame captured yet")
         f = self.last_frame
-        return arc_support(
+        return arc_hits(
             (f.left, f.right), self.camera.model, T_world_needle, self.localizer.model, angles
         )

@@ -19,7 +19,6 @@ from suture_bt.skills.context import TaskContext
 from suture_bt.skills.grasps import backed_off
 from suture_bt.skills.insert import LIFT, PRE_ARC, SWEEP
 from suture_bt.skills.motion import follow_poses, jaw_to, move_to
-from suture_bt.transforms import rotation_angle
 
 #: Jaw opening and back-off distance along the jaws after an empty close (rad, m).
 JAW_OPEN, BACK_OFF = 0.8, 0.010
@@ -88,10 +87,7 @@ class BackOut(Skill):
 
     @staticmethod
     def _sweep_angle(arc, T_world_needle: np.ndarray) -> tuple[float, float]:
-        """The sweep angle of the planned circle nearest the commanded needle pose (the sweep
-        turns the needle about its own centre, so the orientation tells the angle)."""
-        angles = np.linspace(arc.pre_insertion_angle(PRE_ARC), arc.insert_end_angle, 200)
-        R = T_world_needle[:3, :3]
-        d = [rotation_angle(arc.needle_pose(a)[:3, :3], R) for a in angles]
-        i = int(np.argmin(d))
-        return float(angles[i]), float(np.rad2deg(d[i]))
+        """The sweep angle of the planned circle nearest the commanded needle pose, and the
+        turn (deg) left between them."""
+        phi, turn = arc.sweep_angle_of(T_world_needle[:3, :3])
+        return phi, float(np.rad2deg(turn))

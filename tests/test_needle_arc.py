@@ -100,6 +100,19 @@ def test_extraction_continues_until_the_base_has_left_the_exit():
     np.testing.assert_allclose(ext.poses[-1], arc.needle_pose(arc.extract_end_angle), atol=1e-12)
     base = (ext.poses[-1] @ np.r_[NeedleModel().base, 1.0])[:3]
     assert in_port(exit_, base)[2] > 0  # the base end is out
+    later = arc.extraction(start_angle=arc.insert_end_angle + 0.1, angular_speed=0.5, dt=0.01)
+    np.testing.assert_allclose(later.poses[0], arc.needle_pose(arc.insert_end_angle + 0.1))
+    np.testing.assert_allclose(later.poses[-1], ext.poses[-1], atol=1e-12)
+
+
+@pytest.mark.parametrize("phi", [-0.1, 0.0, 1.0, 2.0, 3.5])
+def test_the_sweep_angle_is_read_back_from_the_needle_orientation(phi):
+    arc = plan_needle_arc(*MOVED.pair(3))
+    found, turn = arc.sweep_angle_of(arc.needle_pose(phi)[:3, :3])
+    assert found == pytest.approx(phi, abs=1e-9) and turn == pytest.approx(0.0, abs=1e-6)
+    tilt = make_transform(rpy_to_matrix((np.deg2rad(4.0), 0.0, 0.0)), np.zeros(3))
+    found, turn = arc.sweep_angle_of((arc.needle_pose(phi) @ tilt)[:3, :3])
+    assert found == pytest.approx(phi, abs=1e-3) and np.rad2deg(turn) == pytest.approx(4.0, abs=0.1)
 
 
 def test_timed_sweep_respects_the_angular_limits():

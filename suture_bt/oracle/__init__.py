@@ -20,21 +20,34 @@ class OracleNeedleSensor:
         self.calls = 0
 
     def observe(
-        self, previous: np.ndarray | None = None, prior_checked: bool = False
+        self,
+        previous: np.ndarray | None = None,
+        prior_checked: bool = False,
+        holder: tuple[str, np.ndarray] | None = None,
+        holder_tolerance: float = 0.004,
     ) -> NeedleObservation:
         self.calls += 1
         return NeedleObservation(self._truth.needle_pose(), self._clock.now(), 0.0, 0.0, "oracle")
 
     def support(self, T_world_needle: np.ndarray, angles: np.ndarray) -> tuple[float, float]:
         """Share of the predicted arc samples within 0.5 mm of the true needle's."""
+        hits, _ = self.hits(T_world_needle, angles)
+        share = float(hits.mean()) if len(hits) else 0.0
+        return share, share
+
+    def hits(self, T_world_needle: np.ndarray, angles: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """Per predicted arc sample: within 0.5 mm of the true needle's centre-line."""
         from suture_bt.geometry import NeedleModel
 
-        pts = NeedleModel().point_at(np.asarray(angles, dtype=float))
+        needle = NeedleModel()
+        pts = needle.point_at(np.asarray(angles, dtype=float))
         T = self._truth.needle_pose()
         pred = pts @ np.asarray(T_world_needle)[:3, :3].T + np.asarray(T_world_needle)[:3, 3]
-        true = pts @ T[:3, :3].T + T[:3, 3]
-        share = float(np.mean(np.linalg.norm(pred - true, axis=1) < 5e-4))
-        return share, share
+        line = needle.point_at(np.linspace(needle.tip_angle, needle.base_angle, 400))
+        true = line @ T[:3, :3].T + T[:3, 3]
+        d = np.min(np.linalg.norm(pred[:, None] - true[None], axis=2), axis=1)
+        hits = d < 5e-4
+        return hits, hits.copy()
 
 
 def offset_oracle(world):

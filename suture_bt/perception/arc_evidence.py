@@ -18,6 +18,32 @@ from suture_bt.interfaces import StereoCameraModel
 from suture_bt.perception.colour_refine import ColourRule, needle_coloured
 
 
+def arc_hits(
+    images: tuple[np.ndarray, np.ndarray],
+    stereo: StereoCameraModel,
+    T_world_needle: np.ndarray,
+    needle: NeedleModel,
+    angles: np.ndarray,
+    reach_px: int = 4,
+    rule: ColourRule | None = None,
+) -> tuple[np.ndarray, np.ndarray]:
+    """Per centre-line sample at ``angles``: seen as metal, per eye (left, right)."""
+    rule = rule or ColourRule()
+    pts = needle.point_at(np.asarray(angles, dtype=float))
+    world = pts @ np.asarray(T_world_needle)[:3, :3].T + np.asarray(T_world_needle)[:3, 3]
+    out = []
+    kernel = cv2.getStructuringElement(cv2.MORPH_ELLIPSE, (2 * reach_px + 1, 2 * reach_px + 1))
+    for img, cam in zip(images, (stereo.left, stereo.right), strict=True):
+        metal = cv2.dilate(needle_coloured(img, rule).astype(np.uint8), kernel) > 0
+        uv = np.rint(cam.project(world)).astype(int)
+        h, w = metal.shape
+        inside = (uv[:, 0] >= 0) & (uv[:, 0] < w) & (uv[:, 1] >= 0) & (uv[:, 1] < h)
+        hits = np.zeros(len(uv), bool)
+        hits[inside] = metal[uv[inside, 1], uv[inside, 0]]
+        out.append(hits)
+    return out[0], out[1]
+
+
 def arc_support(
     images: tuple[np.ndarray, np.ndarray],
     stereo: StereoCameraModel,
@@ -28,17 +54,5 @@ def arc_support(
     rule: ColourRule | None = None,
 ) -> tuple[float, float]:
     """Share of the centre-line samples at ``angles`` seen as metal, per eye (left, right)."""
-    rule = rule or ColourRule()
-    pts = needle.point_at(np.asarray(angles, dtype=float))
-    world = pts @ np.asarray(T_world_needle)[:3, :3].T + np.asarray(T_world_needle)[:3, 3]
-    shares = []
-    kernel = cv2.getStructuringElement(cv2.MORPH_ELLIPSE, (2 * reach_px + 1, 2 * reach_px + 1))
-    for img, cam in zip(images, (stereo.left, stereo.right), strict=True):
-        metal = cv2.dilate(needle_coloured(img, rule).astype(np.uint8), kernel) > 0
-        uv = np.rint(cam.project(world)).astype(int)
-        h, w = metal.shape
-        inside = (uv[:, 0] >= 0) & (uv[:, 0] < w) & (uv[:, 1] >= 0) & (uv[:, 1] < h)
-        hits = np.zeros(len(uv), bool)
-        hits[inside] = metal[uv[inside, 1], uv[inside, 0]]
-        shares.append(float(hits.mean()) if len(hits) else 0.0)
-    return shares[0], shares[1]
+    hits = arc_hits(images, stereo, T_world_needle, needle, angles, reach_px, rule)
+    return tuple(float(h.mean()) if len(h) else 0.0 for h in hits)

@@ -106,6 +106,18 @@ class NeedleArc:
         """Needle pose (world) after sweeping φ about its own −z from tip-at-entry."""
         return self.T_world_needle_entry @ _rot_z(-phi)
 
+    def sweep_angle_of(self, R_world_needle: np.ndarray) -> tuple[float, float]:
+        """The sweep angle whose needle orientation is nearest ``R_world_needle``, and the
+        turn (rad) left between them: the sweep turns the needle about its own centre, so the
+        orientation alone tells how far along the circle it is (near the insertion end when
+        two angles are a full turn apart)."""
+        M = self.T_world_needle_entry[:3, :3].T @ np.asarray(R_world_needle, dtype=float)[:3, :3]
+        phi = -float(np.arctan2(M[1, 0] - M[0, 1], M[0, 0] + M[1, 1]))
+        phi += 2 * np.pi * round((self.insert_end_angle - phi) / (2 * np.pi))
+        residual = _rot_z(-phi)[:3, :3].T @ M
+        turn = float(np.arccos(np.clip((np.trace(residual) - 1.0) / 2.0, -1.0, 1.0)))
+        return phi, turn
+
     def tip_position(self, phi: float) -> np.ndarray:
         """The tip (world) after sweeping φ."""
         return (self.needle_pose(phi) @ np.r_[self.needle.tip, 1.0])[:3]
@@ -170,9 +182,11 @@ class NeedleArc:
         """Timed needle poses from φ = ``start_angle`` (0: tip at entry) to the insertion end."""
         return self.sweep(start_angle, self.insert_end_angle, **timing)
 
-    def extraction(self, **timing) -> TimedPoses:
-        """Timed needle poses continuing from the insertion end until the base has left."""
-        return self.sweep(self.insert_end_angle, self.extract_end_angle, **timing)
+    def extraction(self, start_angle: float | None = None, **timing) -> TimedPoses:
+        """Timed needle poses continuing from the insertion end (or from ``start_angle``,
+        where the needle was left) until the base has left the exit."""
+        start = self.insert_end_angle if start_angle is None else float(start_angle)
+        return self.sweep(start, self.extract_end_angle, **timing)
 
 
 def gripper_poses(needle_poses: TimedPoses, T_gripper_needle: np.ndarray) -> TimedPoses:
