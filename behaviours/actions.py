@@ -10,6 +10,7 @@ from suture_bt.behaviours.skill_behaviour import SkillBehaviour
 from suture_bt.planning import NeedleArcError, plan_needle_arc
 from suture_bt.skills.calibrate_arm import CalibrateArm
 from suture_bt.skills.context import TaskContext
+from suture_bt.skills.dropped import FindDropped
 from suture_bt.skills.extract import Extract
 from suture_bt.skills.grasps import free_angle, held_arc_angle, insertion_grasp_angle
 from suture_bt.skills.handover import Handover
@@ -116,6 +117,18 @@ class PickUpNeedle(SkillBehaviour):
 
     def make_skill(self):
         return PickUp(self.context, self.arm, self.angle(self.context))
+
+
+class FindDroppedNeedle(SkillBehaviour):
+    """Recovery after a drop: let go, localise the fallen needle, check ``picker`` can take it
+    at ``angle(context)`` (else fail saying why: in the tissue, on its edge, out of reach)."""
+
+    def __init__(self, picker: str, angle: AngleRule, name: str | None = None):
+        super().__init__(name or "Find the dropped needle")
+        self.picker, self.angle = picker, angle
+
+    def make_skill(self):
+        return FindDropped(self.context, self.picker, self.angle(self.context))
 
 
 # ------------------------------------------------------------------ angle rules

@@ -11,6 +11,7 @@ from py_trees.common import Status
 
 from suture_bt.behaviours.skill_behaviour import needs
 from suture_bt.skills.checks import JAW_CLOSED_MAX, jaw_holds_wire
+from suture_bt.skills.dropped import dropped_by
 from suture_bt.skills.reach import pair_reach
 
 
@@ -132,3 +133,15 @@ class NeedleStillHeld(py_trees.behaviour.Behaviour):
             return Status.FAILURE
         self.feedback_message = f"{b.holder}'s jaw at {angle:.3f} rad"
         return Status.RUNNING
+
+
+class NeedleDropped(_Condition):
+    """The guard of the dropped-needle recovery: the believed holder's jaw closed below the
+    wire (a throw that failed for another reason is not recovered by a pick-up)."""
+
+    def __init__(self, name: str = "Needle dropped?"):
+        super().__init__(name)
+
+    def ask(self) -> tuple[bool, str]:
+        arm, why = dropped_by(self.context)
+        return arm is not None, why

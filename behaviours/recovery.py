@@ -8,6 +8,11 @@ the recovery; if the recovery succeeds, run the action again; if the recovery fa
 Every attempt is visible: ``feedback_message`` names the attempt and carries the running or
 failing child's own feedback (that is how a failure's reason reaches the user), and
 ``history`` keeps each child's outcome of the current run.
+
+``blame_recovery``: a recovery that applied (its guard, the first child of a composite
+recovery, said yes) and then failed is the reason the node failed, not the attempt before it:
+the failed action is reset (INVALID; its outcome stays in ``history`` and the feedback), so a
+reader of the tree's failed nodes (``ThrowScope``) finds the recovery's reason first.
 """
 
 from __future__ import annotations
@@ -25,6 +30,15 @@ HistoryEntry = tuple[int, str, Status, str]
 
 def _reason(child: Behaviour) -> str:
     return child.feedback_message or f"{child.name!r} gave no reason"
+
+
+def _guard_passed(recovery: Behaviour) -> bool:
+    """The recovery applied: a composite's first child (its guard) succeeded; a leaf always
+    (decorators, such as a time limit, are looked through)."""
+    while isinstance(recovery, py_trees.decorators.Decorator):
+        recovery = recovery.decorated
+    children = getattr(recovery, "children", [])
+    return not children or children[0].status == Status.SUCCESS
 
 
 def _said(prefix: str, child: Behaviour) -> str:
@@ -47,12 +61,20 @@ class RecoveryNode(py_trees.composites.Composite):
             current run (and of one pre-empted while running, with status INVALID)
     """
 
-    def __init__(self, name: str, action: Behaviour, recovery: Behaviour, num_retries: int):
+    def __init__(
+        self,
+        name: str,
+        action: Behaviour,
+        recovery: Behaviour,
+        num_retries: int,
+        blame_recovery: bool = False,
+    ):
         if isinstance(num_retries, bool) or not isinstance(num_retries, int) or num_retries < 0:
             raise ValueError(f"RecoveryNode {name!r}: num_retries must be an int ≥ 0")
         if action is recovery:
             raise ValueError(f"RecoveryNode {name!r}: action and recovery must be two nodes")
         self.num_retries = num_retries
+        self.blame_recovery = blame_recovery
         self.attempts = 0
         self.retries = 0
         self.history: list[HistoryEntry] = []
@@ -141,6 +163,8 @@ class RecoveryNode(py_trees.composites.Composite):
                 f"recovery {recovery.name!r} failed after {of}: {_reason(recovery)} "
                 f"(the attempt failed: {_reason(action)})"
             )
+            if self.blame_recovery and _guard_passed(recovery):
+                action.stop(Status.INVALID)
             self.stop(Status.FAILURE)
         yield self
 
@@ -175,7 +199,11 @@ class RecoveryNode(py_trees.composites.Composite):
 
 
 def recovery_idiom(
-    name: str, action: Behaviour, recovery: Behaviour, num_retries: int
+    name: str,
+    action: Behaviour,
+    recovery: Behaviour,
+    num_retries: int,
+    blame_recovery: bool = False,
 ) -> RecoveryNode:
     """The recovery pattern as a subtree factory, in the style of ``py_trees.idioms``."""
-    return RecoveryNode(name, action, recovery, num_retries)
+    return RecoveryNode(name, action, recovery, num_retries, blame_recovery)

@@ -84,16 +84,64 @@ def test_unconfirmed_insertion_is_looked_at_again_and_confirmed(session):
     assert passed(session), session.scores()[0].failure
 
 
+def ran(session, name: str) -> list[tuple[int, str, Status]]:
+    """(attempt, child, status) of every child RecoveryNode ``name`` finished."""
+    return [(a, child, status) for a, child, status, _ in node(session, name).history]
+
+
 @pytest.mark.slow
-def test_needle_dropped_mid_insertion_fails_the_throw_with_its_reason(session):
+def test_needle_dropped_before_the_insertion_is_picked_up_and_the_throw_resumed(session):
     assert session.run_until(running(session, "Insert pair 1", "approaching")) is not None
     session.world.faults.drop("psm2")
     throw = finish(session)
+    assert ran(session, "Retry: pair 1 after a drop") == [
+        (1, "Pair 1 (time limit)", Status.FAILURE),
+        (1, "Pick-up after a drop in pair 1 (time limit)", Status.SUCCESS),
+        (2, "Pair 1 (time limit)", Status.SUCCESS),
+    ]
+    retry = node(session, "Retry: pair 1 after a drop")
+    assert isinstance(retry, RecoveryNode) and retry.retries == 1
+    assert "needle dropped by psm2" in retry.history[0][3]
+    assert "succeeded on attempt 2 of 2" in retry.feedback_message
+    reports = session.context.reports
+    found = [r for r in reports if r["skill"] == "find dropped needle"]
+    assert [(r["status"], r["dropped_by"]) for r in found] == [("SUCCESS", "psm2")]
+    picked = [r for r in reports if r["behaviour"] == "PSM2 picks the dropped needle up"]
+    assert [r["status"] for r in picked] == ["SUCCESS"]
+    assert throw["status"] == "SUCCESS", throw["reason"]
+    assert passed(session), session.scores()[0].failure
+    assert GroundTruth(session.world).needle_holders() == ["psm1"]  # pulled through
+
+
+#: On the floor beyond the phantom's near edge: in the cameras' view, out of both arms' reach.
+OUT_OF_REACH = (0.0, -0.12, 0.0421)
+
+
+@pytest.mark.slow
+def test_needle_dropped_out_of_both_arms_reach_fails_the_throw_saying_so(session, tmp_path):
+    assert session.run_until(running(session, "Insert pair 1", "approaching")) is not None
+    session.world.faults.drop("psm2")
+    T = np.eye(4)
+    T[:3, :3] = _rot_z(0.3)[:3, :3]
+    T[:3, 3] = OUT_OF_REACH
+    session.world.needle.set_pose(T)  # test API: the needle fell off the phantom
+    t_drop = session.context.clock.now()
+    throw = finish(session)
     assert throw["status"] == "FAILURE"
-    assert "needle dropped by psm2" in throw["reason"]
-    assert node(session, "Needle still held?").status == Status.FAILURE
-    retries = [n for n in session.root.iterate() if isinstance(n, RecoveryNode)]
-    assert all(n.retries == 0 for n in retries)  # the watch, not a retry, ended it
+    assert "needle dropped by psm2 and out of both arms' reach: psm2: " in throw["reason"]
+    assert "; psm1: " in throw["reason"]
+    assert session.context.clock.now() - t_drop < 10.0  # no hang: it fails as soon as it knows
+    assert session.root.status == Status.FAILURE
+    retry = node(session, "Retry: pair 1 after a drop")
+    assert [h[1:3] for h in retry.history] == [
+        ("Pair 1 (time limit)", Status.FAILURE),
+        ("Pick-up after a drop in pair 1 (time limit)", Status.FAILURE),
+    ]
+    assert not any(r["skill"] == "pick up" for r in session.context.reports[-3:])
+    result = session.write(tmp_path)
+    assert (tmp_path / "result.json").is_file()
+    assert result["passed"] is False and result["tree_status"] == "FAILURE"
+    assert "out of both arms' reach" in result["throws"][0]["tree_reason"]
 
 
 @pytest.mark.parametrize("phi_deg", [0.0, 40.0, 90.0])
@@ -108,6 +156,12 @@ def test_back_out_finds_the_sweep_angle_of_a_needle_on_its_arc(phi_deg):
     assert found == pytest.approx(phi, abs=np.deg2rad(1.0)) and turn < 1.0
     _, off = BackOut._sweep_angle(arc, arc.needle_pose(phi) @ _rot_x(np.deg2rad(20.0)))
     assert off > 15.0  # a needle off the arc's plane is refused (ON_ARC_DEG)
+
+
+def _rot_z(a: float) -> np.ndarray:
+    T = np.eye(4)
+    T[:2, :2] = [[np.cos(a), -np.sin(a)], [np.sin(a), np.cos(a)]]
+    return T
 
 
 def _rot_x(a: float) -> np.ndarray:

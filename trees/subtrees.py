@@ -11,8 +11,10 @@ retried after the taker re-opens and backs off and the giver's needle is re-loca
 extraction whose grasp closed empty re-opens, backs off and tries again; an insertion not
 confirmed is looked at again (a needle at the end of its sweep is then only confirmed), or
 backed out along its arc, re-localised and inserted once more. A watch
-beside every throw's steps fails the throw when the holder's jaw closes below the wire
-("needle dropped by psm2").
+beside every throw's steps fails the attempt when the holder's jaw closes below the wire
+("needle dropped by psm2"); the needle is then found where it fell and picked up by PSM2 at
+the grasp the pairs still to do need, and the throw's steps run again without redoing what
+is done. A needle that cannot be picked up fails the throw saying why.
 """
 
 from __future__ import annotations
@@ -27,6 +29,7 @@ from suture_bt.behaviours.actions import (
     BackOutNeedle,
     Calibrate,
     ExtractNeedle,
+    FindDroppedNeedle,
     HandOver,
     InsertNeedle,
     Localize,
@@ -38,6 +41,7 @@ from suture_bt.behaviours.actions import (
 )
 from suture_bt.behaviours.conditions import (
     GraspMissed,
+    NeedleDropped,
     NeedleLocalised,
     NeedleStillHeld,
     PairsInReach,
@@ -46,12 +50,18 @@ from suture_bt.behaviours.needle_start import NeedleStart
 from suture_bt.behaviours.parallel import ParallelWithReason
 from suture_bt.behaviours.recovery import recovery_idiom
 from suture_bt.behaviours.sim_timeout import SimTimeout
+from suture_bt.behaviours.throw_progress import (
+    SkipWhen,
+    grasp_for_remaining,
+    holds_needle,
+    pulled_through,
+)
 from suture_bt.behaviours.throw_scope import ThrowScope
 
 #: Inserting arm (reaches the entries) and pulling arm (reaches the exits) of the SRC scene.
 INSERTER, PULLER = "psm2", "psm1"
-#: Simulated-time limits (s): preparation, and one throw.
-PREPARE_LIMIT, THROW_LIMIT = 60.0, 45.0
+#: Simulated-time limits (s): preparation, one attempt of a throw, a pick-up after a drop.
+PREPARE_LIMIT, THROW_LIMIT, PICK_UP_LIMIT = 60.0, 45.0, 30.0
 #: Retries of each recovery branch.
 RETRIES = 1
 
@@ -179,26 +189,51 @@ def retried_extraction(pair: int) -> py_trees.behaviour.Behaviour:
     )
 
 
+def picked_up_again(pair: int, later_pairs: tuple[int, ...]) -> py_trees.behaviour.Behaviour:
+    """After a drop: let go, find the needle where it fell, and PSM2 picks it up at the grasp
+    the pairs still to do need (fails saying why when it cannot: in the tissue, on its edge,
+    out of reach, not found)."""
+    grasp = grasp_for_remaining(pair, later_pairs)
+    return py_trees.composites.Sequence(
+        f"Pick up the needle dropped in pair {pair}",
+        memory=True,
+        children=[
+            NeedleDropped(),
+            FindDroppedNeedle(INSERTER, grasp),
+            PickUpNeedle(INSERTER, grasp, name="PSM2 picks the dropped needle up"),
+        ],
+    )
+
+
 def throw(pair: int, later_pairs: tuple[int, ...]) -> py_trees.behaviour.Behaviour:
-    """One throw through ``pair``; ``later_pairs`` decide the grasp PSM2 takes back."""
+    """One throw through ``pair``; ``later_pairs`` decide the grasp PSM2 takes back. A drop
+    (the watch) is recovered by a pick-up and the throw's steps run again, skipping what is
+    done: a pair pulled through is not inserted again, a needle picked up by PSM2 at the
+    later pairs' grasp needs no hand-back."""
+    work = py_trees.composites.Sequence(
+        f"Insert and extract pair {pair}",
+        memory=True,
+        children=[
+            NeedleLocalised(INSERTER, name="Needle in PSM2's hand?"),
+            retried_insertion(pair),
+            retried_extraction(pair),
+        ],
+    )
     steps = [
         in_reach((pair,)),
-        NeedleLocalised(INSERTER, name="Needle in PSM2's hand?"),
-        retried_insertion(pair),
-        retried_extraction(pair),
+        SkipWhen(f"Unless pair {pair} is pulled through", work, lambda c: pulled_through(c, pair)),
     ]
     if later_pairs:
-        steps.append(
-            retried_handover(
-                HandOver(
-                    PULLER,
-                    INSERTER,
-                    grasp_for_pairs(later_pairs),
-                    next_pair=later_pairs[0],
-                    name=f"Hand back after pair {pair}",
-                )
+        hand_back = retried_handover(
+            HandOver(
+                PULLER,
+                INSERTER,
+                grasp_for_pairs(later_pairs),
+                next_pair=later_pairs[0],
+                name=f"Hand back after pair {pair}",
             )
         )
+        steps.append(SkipWhen("Unless PSM2 already holds it", hand_back, holds_needle(INSERTER)))
     seq = py_trees.composites.Sequence(f"Pair {pair} steps", memory=True, children=steps)
     watched = ParallelWithReason(
         f"Pair {pair}, needle watched",
@@ -206,4 +241,15 @@ def throw(pair: int, later_pairs: tuple[int, ...]) -> py_trees.behaviour.Behavio
         children=[NeedleStillHeld(), seq],
         voice=1,
     )
-    return ThrowScope(pair, SimTimeout(f"Pair {pair} (time limit)", watched, THROW_LIMIT))
+    retried = recovery_idiom(
+        f"Retry: pair {pair} after a drop",
+        SimTimeout(f"Pair {pair} (time limit)", watched, THROW_LIMIT),
+        SimTimeout(
+            f"Pick-up after a drop in pair {pair} (time limit)",
+            picked_up_again(pair, later_pairs),
+            PICK_UP_LIMIT,
+        ),
+        RETRIES,
+        blame_recovery=True,
+    )
+    return ThrowScope(pair, retried)

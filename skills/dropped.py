@@ -1,0 +1,164 @@
+"""Skill: after a drop, let go, find the needle where it fell and judge whether it can be taken.
+
+The watch beside a throw sees the drop in the holder's measured jaw (closed below the wire).
+This skill is the first step of the recovery: the tree forgets the holder (the in-hand
+transform is gone), the arm that dropped it opens its jaw and rises, both arms leave the
+cameras' sight lines to where the needle most likely fell (straight below), the needle is given
+a moment to come to rest, and it is localised from images where it lies. Then, from that
+estimate alone, it says whether a pick-up can work: a needle caught in the tissue (hanging in
+a port), one standing on its edge (no jaw direction from above) or one out of the picking
+arm's reach fails the skill with a reason that starts "needle dropped by <arm> and ...", so the
+throw ends saying exactly why. Output: the free belief (holder None) the pick-up starts from.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from suture_bt.geometry.phantom import TISSUE_TOP_Z
+from suture_bt.skills import checks
+from suture_bt.skills.base import Skill, SkillFailure, Waiting
+from suture_bt.skills.context import NeedleBelief, TaskContext
+from suture_bt.skills.grasps import backed_off, hand, tip_goal
+from suture_bt.skills.line_of_sight import clear_tip_pose
+from suture_bt.skills.localize_needle import LocalizeNeedle
+from suture_bt.skills.motion import feasible, jaw_to, move_to, together, wait
+from suture_bt.skills.pick_up import APPROACH, LIFT, MAX_TILT, turned_over_hand
+from suture_bt.skills.recover import JAW_OPEN
+from suture_bt.transforms import invert
+
+#: The fallen needle is given this long to come to rest before it is looked at (s); the arm
+#: that dropped it rises this far from the tissue first (m).
+SETTLE_S, RISE = 0.3, 0.010
+#: A seen needle with a point this far under the tissue top or a port's surface, within
+#: ``PORT_RADIUS`` of that port, is caught in the tissue (m).
+UNDER_SURFACE, PORT_RADIUS = 0.001, 0.006
+
+
+def dropped_by(context: TaskContext) -> tuple[str | None, str]:
+    """The believed holder whose measured jaw closed below the wire (None: no drop), and why."""
+    b = context.belief
+    if b is None or b.holder is None:
+        return None, "no arm is believed to hold the needle"
+    angle = context.arm(b.holder).jaw_angle()
+    held, detail = checks.jaw_holds_wire(angle)
+    if angle <= checks.JAW_CLOSED_MAX and not held:
+        return b.holder, f"needle dropped by {b.holder} ({detail})"
+    return None, f"{b.holder} still holds the needle ({detail})"
+
+
+def caught_in_tissue(context: TaskContext, T_world_needle: np.ndarray) -> str:
+    """'' for a needle lying on the tissue; else where the seen arc goes into it."""
+    pts = context.needle.centerline(60) @ T_world_needle[:3, :3].T + T_world_needle[:3, 3]
+    for port in context.phantom.ports():
+        local = (pts - port.position) @ port.T[:3, :3]  # port frame: z along the normal
+        near = np.hypot(local[:, 0], local[:, 1]) <= PORT_RADIUS
+        if np.any(near & (local[:, 2] < -UNDER_SURFACE)):
+            depth = float(-np.min(local[near, 2]))
+            return f"hanging in {port.name} ({1e3 * depth:.1f} mm under its surface)"
+    T_ph = invert(context.phantom.T_world_phantom)
+    z = pts @ T_ph[:3, :3].T + T_ph[:3, 3]
+    below = float(TISSUE_TOP_Z - np.min(z[:, 2]))
+    near_block = float(np.min(np.abs(z[:, 2] - TISSUE_TOP_Z)))
+    if below > UNDER_SURFACE and near_block < 0.005:  # part of it under the top, part above
+        return f"stuck in the tissue ({1e3 * below:.1f} mm under its top)"
+    return ""
+
+
+def pick_up_path(context: TaskContext, T_world_needle: np.ndarray, arc_angle: float):
+    """The pick-up's tip poses (hover, grasp, lift) for this resting needle, as
+    :class:`~suture_bt.skills.pick_up.PickUp` plans them; SkillFailure for a needle on edge."""
+    up = context.phantom.T_world_phantom[:3, 2]
+    z_up = float(T_world_needle[:3, 2] @ up)
+    tilt = float(np.arccos(min(1.0, abs(z_up))))
+    if tilt > MAX_TILT:
+        raise SkillFailure(
+            f"standing on its edge (plane {np.rad2deg(tilt):.0f}° from the tissue, > "
+            f"{np.rad2deg(MAX_TILT):.0f}°): no grasp from above"
+        )
+    T_hand = (
+        hand(context.needle, arc_angle)
+        if z_up >= 0
+        else turned_over_hand(context.needle, arc_angle)
+    )
+    goal = tip_goal(T_world_needle, T_hand)
+    T_lift = goal.copy()
+    T_lift[:3, 3] += LIFT * up
+    return [backed_off(goal, APPROACH), goal, T_lift]
+
+
+class FindDropped(Skill):
+    """The needle fell from its holder: let go, localise it where it lies, and check that
+    ``picker`` can take it at ``arc_angle`` (rad) (the other arms' reach is reported)."""
+
+    name = "find dropped needle"
+
+    def __init__(self, context: TaskContext, picker: str, arc_angle: float):
+        super().__init__(context)
+        self.picker, self.arc_angle = picker, float(arc_angle)
+
+    def program(self) -> Waiting:
+        ctx = self.context
+        arm, why = dropped_by(ctx)
+        if arm is None:
+            raise SkillFailure(f"no dropped needle to look for: {why}")
+        self.report.update(dropped_by=arm, jaw=why)
+        T_last = ctx.predicted_needle()
+        ctx.belief = NeedleBelief(T_last, ctx.clock.now(), "dropped", holder=None)
+        self.say(f"{why}: {arm} opens its jaw and both arms make way for the cameras")
+        yield from jaw_to(ctx.arm(arm), JAW_OPEN)
+        yield from together(*self._make_way(arm, self._landing_guess(T_last)))
+        yield from wait(ctx.clock, SETTLE_S)
+        self.say(f"looking for the needle dropped by {arm}")
+        try:
+            yield from self.run(LocalizeNeedle(ctx, None))
+        except SkillFailure as e:
+            raise SkillFailure(f"needle dropped by {arm} and not found: {e.reason}") from None
+        T = ctx.belief.T_world_needle.copy()
+        where = caught_in_tissue(ctx, T)
+        if where:
+            raise SkillFailure(f"needle dropped by {arm} and {where}: it cannot be picked up")
+        try:
+            path = pick_up_path(ctx, T, self.arc_angle)
+        except SkillFailure as e:
+            raise SkillFailure(f"needle dropped by {arm} and {e.reason}") from None
+        names = [self.picker] + [n for n in ctx.arms if n != self.picker]
+        reach = {n: feasible(ctx.arm(n), path) for n in names}
+        self.report["reach"] = reach
+        if reach[self.picker]:
+            others = [n for n in names[1:] if not reach[n]]
+            if not others:
+                said = "; ".join(f"{n}: {r}" for n, r in reach.items())
+                where = "both arms'" if len(names) == 2 else "every arm's"
+                raise SkillFailure(f"needle dropped by {arm} and out of {where} reach: {said}")
+            raise SkillFailure(
+                f"needle dropped by {arm} and out of {self.picker}'s reach "
+                f"({reach[self.picker]}); {', '.join(others)} could reach it, but only "
+                f"{self.picker} picks it up in this tree"
+            )
+        at = np.round(1e3 * T[:3, 3], 1)
+        self.report["T_world_needle"] = T.tolist()
+        self.say(f"needle dropped by {arm} lies on the tissue at {at} mm, in {self.picker}'s reach")
+
+    def _landing_guess(self, T_last: np.ndarray) -> np.ndarray:
+        """Where a needle falling from ``T_last`` lands first: straight down on the tissue top."""
+        T_ph = self.context.phantom.T_world_phantom
+        up, top = T_ph[:3, 2], (T_ph @ np.array([0.0, 0.0, TISSUE_TOP_Z, 1.0]))[:3]
+        p = T_last[:3, 3]
+        return p - float((p - top) @ up) * up
+
+    def _make_way(self, dropper: str, target: np.ndarray) -> list[Waiting]:
+        """The dropper rises ``RISE`` from the tissue; every arm leaves the sight lines from
+        the cameras to ``target`` (backing off along the jaws would put the shaft in them)."""
+        ctx = self.context
+        up = ctx.phantom.T_world_phantom[:3, 2]
+        moves = []
+        for name, a in ctx.arms.items():
+            T = a.commanded_tip_world()
+            if name == dropper:
+                T[:3, 3] += RISE * up
+            cleared = clear_tip_pose(ctx, T, a.base_frame()[:3, 3], target)
+            T = T if cleared is None else cleared
+            if (name == dropper or cleared is not None) and not feasible(a, [T]):
+                moves.append(move_to(ctx.clock, a, [T], "make way for the cameras"))
+        return moves
