@@ -160,7 +160,13 @@ def test_the_report_counts_passes_errors_and_reasons_with_wilson_intervals(tmp_p
     assert "7/10 (70 %, CI 40-89 %)" in md and "Anchors" in md and "0.3 mm / 1.1°" in md
     for png in ("errors.png", "time_per_throw.png", "recoveries.png", "pass_by_offset.png"):
         assert (tmp_path / png).read_bytes()[:4] == b"\x89PNG"
+    # faults: odd trials had a slip inside throw 1 (trial 1 failed it) and a frame lost after
+    assert s["faults_fired"] == {"slip": 4, "frame_lost": 4} and s["runs_with_a_fault"] == 4
+    assert (s["throws_hit_by_a_fault"]["k"], s["throws_hit_by_a_fault"]["n"]) == (3, 4)
+    assert set(s["throws_hit_by_kind"]) == {"slip"}
+    assert "| slip | 4 | 3/4" in md and "| frame_lost | 4 | none inside a throw |" in md
     rows = json.loads((tmp_path / "results.json").read_text())["trials"]
+    assert rows[1]["throws"][0]["faults"] == ["slip"] and rows[2]["throws"][0]["faults"] == []
     assert [r["index"] for r in rows] == list(range(10)) and rows[3]["status"] == "error"
     assert rows[0]["throws"][0]["agree"] and rows[0]["offsets"]["psm1"]
 

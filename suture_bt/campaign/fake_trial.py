@@ -78,4 +78,16 @@ def fake_trial(
         "ports": FAKE_PORTS,
     }
     files = {"result.json": json.dumps(result), "trajectory.csv": fake_trajectory(passed)}
-    return {"status": "ok", "files": files, "extras": {"fake": mode, "scene": spec["scene"]}}
+    extras = {
+        "fake": mode,
+        "scene": spec["scene"],
+        "throw_windows": {"1": [0.0, throw["sim_time_s"]]},
+        # odd trials: a slip inside the throw, and a lost frame after it
+        "faults_fired": [
+            {"kind": "slip", "t": 0.5, "arm": "psm2"},
+            {"kind": "frame_lost", "t": 99.0, "arm": None},
+        ]
+        if spec["index"] % 2
+        else [],
+    }
+    return {"status": "ok", "files": files, "extras": extras}

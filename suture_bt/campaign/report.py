@@ -56,7 +56,17 @@ def _throw_row(trial: dict[str, Any], t: dict[str, Any]) -> dict[str, Any]:
         "sim_time_s": t.get("sim_time_s"),
         "wall_time_s": extras.get("throw_wall_s", {}).get(str(t["pair"])),
         "failure": t.get("failure"),
+        "faults": _faults_in(extras, t["pair"]),
     }
+
+
+def _faults_in(extras: dict[str, Any], pair: int) -> list[str]:
+    """Kinds of the faults that fired inside this throw's window (ground truth, after the run)."""
+    t0, t1 = (extras.get("throw_windows", {}).get(str(pair)) or [None, None])[:2]
+    if t0 is None:
+        return []
+    end = float("inf") if t1 is None else t1
+    return sorted({f["kind"] for f in extras.get("faults_fired", []) if t0 <= f["t"] <= end})
 
 
 def _disagreement(trial: dict[str, Any], t: dict[str, Any]) -> str:
@@ -129,6 +139,7 @@ def trial_row(trial: dict[str, Any]) -> dict[str, Any]:
         "task1": locs,
         "recoveries": extras.get("recoveries", {}),
         "recovery_nodes": extras.get("recovery_nodes"),
+        "faults_fired": dict(Counter(f["kind"] for f in extras.get("faults_fired", []))),
         "throws": [_throw_row(trial, t) for t in result.get("throws", [])],
     }
     return row
@@ -155,8 +166,17 @@ def summarise(rows: list[dict[str, Any]], config: dict[str, Any]) -> dict[str, A
             if t["attempted"] and not t["passed"]:
                 throw_failures[reason_key(t["failure"])] += 1
     recoveries: Counter[str] = Counter()
+    fired: Counter[str] = Counter()
     for r in ok:
         recoveries.update(r.get("recoveries", {}))
+        fired.update(r.get("faults_fired", {}))
+    hit = [t for t in throws if t.get("faults")]
+    hit_by_kind = {
+        k: rate(
+            sum(t["passed"] for t in hit if k in t["faults"]), sum(k in t["faults"] for t in hit)
+        )
+        for k in sorted({k for t in hit for k in t["faults"]})
+    }
     by_offset = []
     for lo, hi in zip(OFFSET_BINS[:-1], OFFSET_BINS[1:], strict=True):
         inside = [
@@ -219,6 +239,10 @@ def summarise(rows: list[dict[str, Any]], config: dict[str, Any]) -> dict[str, A
         "task1_centre_mm": spread(x["centre_mm"] for x in locs if x.get("adopted")),
         "task1_angle_deg": spread(x["angle_deg"] for x in locs if x.get("adopted")),
         "recoveries": dict(recoveries.most_common()),
+        "faults_fired": dict(fired.most_common()),
+        "runs_with_a_fault": sum(bool(r.get("faults_fired")) for r in ok),
+        "throws_hit_by_a_fault": rate(sum(t["passed"] for t in hit), len(hit)),
+        "throws_hit_by_kind": hit_by_kind,
         "recovery_nodes_in_tree": max((r.get("recovery_nodes") or 0 for r in ok), default=0),
         "failures": dict(failures.most_common()),
         "throw_failures": dict(throw_failures.most_common()),

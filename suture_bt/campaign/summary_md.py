@@ -130,6 +130,22 @@ def summary_markdown(s: dict[str, Any], plots: list[str]) -> str:
         lines.append("No recovery branch ran.")
     else:
         lines.append("The tree has no recovery branches (RecoveryNode) yet: nothing to count.")
+    lines += ["", "## Faults (what fired, from the world's record after the run)", ""]
+    if s.get("faults_fired"):
+        lines += [
+            f"{s['runs_with_a_fault']} of {s['trials'] - s['errors']} runs had at least one "
+            f"fault; throws in whose window a fault fired that still passed: "
+            f"{rate_text(s['throws_hit_by_a_fault'])}.",
+            "",
+            "| fault | fired | throws hit that passed |",
+            "|---|---|---|",
+        ]
+        by_kind = s["throws_hit_by_kind"]
+        for k, v in s["faults_fired"].items():
+            hit = rate_text(by_kind[k]) if k in by_kind else "none inside a throw"
+            lines.append(f"| {k} | {v} | {hit} |")
+    else:
+        lines.append("No fault fired.")
     lines += ["", "## Failures by reason", ""]
     if s["failures"]:
         lines += ["| failed runs: first reason (numbers as #) | runs |", "|---|---|"]

@@ -145,6 +145,11 @@ class TrialMonitor:
             "throw_windows": {
                 str(p): [r.get("t_start"), r.get("t_end")] for p, r in sorted(throws.items())
             },
+            "faults_fired": [
+                {"kind": e.kind, "t": round(float(e.time), 4), "arm": e.arm}
+                for e in self.truth.fault_events()
+                if e.kind != "servo_model"  # the drawn servo is a parameter, not an event
+            ],
             "throw_wall_s": {
                 str(p): None if w[1] is None else round(w[1] - w[0], 3)
                 for p, w in sorted(self._throw_wall.items())
