@@ -6,9 +6,11 @@ transform is gone), the arm that dropped it opens its jaw and rises, both arms l
 cameras' sight lines to where the needle most likely fell (straight below), the needle is given
 a moment to come to rest, and it is localised from images where it lies. Then, from that
 estimate alone, it says whether a pick-up can work: a needle caught in the tissue (hanging in
-a port), one standing on its edge (no jaw direction from above) or one out of the picking
-arm's reach fails the skill with a reason that starts "needle dropped by <arm> and ...", so the
-throw ends saying exactly why. Output: the free belief (holder None) the pick-up starts from.
+a port), one standing on its edge (no jaw direction from above), one lying turned over (only
+the turned hand takes it from above, and no handover gives the driving hand back: both arms
+take it from the side it is held from) or one out of the picking arm's reach fails the skill
+with a reason that starts "needle dropped by <arm> and ...", so the throw ends saying why.
+Output: the free belief (holder None) the pick-up starts from.
 """
 
 from __future__ import annotations
@@ -23,7 +25,7 @@ from suture_bt.skills.grasps import backed_off, hand, tip_goal
 from suture_bt.skills.line_of_sight import clear_tip_pose
 from suture_bt.skills.localize_needle import LocalizeNeedle
 from suture_bt.skills.motion import feasible, jaw_to, move_to, together, wait
-from suture_bt.skills.pick_up import APPROACH, LIFT, MAX_TILT, turned_over_hand
+from suture_bt.skills.pick_up import APPROACH, LIFT, MAX_TILT
 from suture_bt.skills.recover import JAW_OPEN
 from suture_bt.transforms import invert
 
@@ -66,8 +68,9 @@ def caught_in_tissue(context: TaskContext, T_world_needle: np.ndarray) -> str:
 
 
 def pick_up_path(context: TaskContext, T_world_needle: np.ndarray, arc_angle: float):
-    """The pick-up's tip poses (hover, grasp, lift) for this resting needle, as
-    :class:`~suture_bt.skills.pick_up.PickUp` plans them; SkillFailure for a needle on edge."""
+    """The pick-up's tip poses (hover, grasp, lift) for this resting needle with the driving
+    hand, as :class:`~suture_bt.skills.pick_up.PickUp` plans them; SkillFailure (its reason)
+    for a needle on its edge or lying turned over."""
     up = context.phantom.T_world_phantom[:3, 2]
     z_up = float(T_world_needle[:3, 2] @ up)
     tilt = float(np.arccos(min(1.0, abs(z_up))))
@@ -76,12 +79,13 @@ def pick_up_path(context: TaskContext, T_world_needle: np.ndarray, arc_angle: fl
             f"standing on its edge (plane {np.rad2deg(tilt):.0f}° from the tissue, > "
             f"{np.rad2deg(MAX_TILT):.0f}°): no grasp from above"
         )
-    T_hand = (
-        hand(context.needle, arc_angle)
-        if z_up >= 0
-        else turned_over_hand(context.needle, arc_angle)
-    )
-    goal = tip_goal(T_world_needle, T_hand)
+    if z_up < 0.0:
+        raise SkillFailure(
+            "lying turned over: from above only the turned hand takes it, the insertion "
+            "cannot be driven with that hand and no handover changes the side the jaws hold "
+            "it from (both arms take it from the same side)"
+        )
+    goal = tip_goal(T_world_needle, hand(context.needle, arc_angle))
     T_lift = goal.copy()
     T_lift[:3, 3] += LIFT * up
     return [backed_off(goal, APPROACH), goal, T_lift]

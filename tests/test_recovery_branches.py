@@ -1,6 +1,8 @@
 """Recovery branches in a real single-throw session: a fault forced through ``world.faults``,
 then the tree's own record (recovery nodes' history, skill reports, the throw's reason)."""
 
+from types import SimpleNamespace
+
 import numpy as np
 import pytest
 from py_trees.common import Status
@@ -121,10 +123,7 @@ OUT_OF_REACH = (0.0, -0.12, 0.0421)
 def test_needle_dropped_out_of_both_arms_reach_fails_the_throw_saying_so(session, tmp_path):
     assert session.run_until(running(session, "Insert pair 1", "approaching")) is not None
     session.world.faults.drop("psm2")
-    T = np.eye(4)
-    T[:3, :3] = _rot_z(0.3)[:3, :3]
-    T[:3, 3] = OUT_OF_REACH
-    session.world.needle.set_pose(T)  # test API: the needle fell off the phantom
+    session.world.needle.set_pose(_pose(_rot_z(0.3), OUT_OF_REACH))  # test API: off the phantom
     t_drop = session.context.clock.now()
     throw = finish(session)
     assert throw["status"] == "FAILURE"
@@ -144,6 +143,61 @@ def test_needle_dropped_out_of_both_arms_reach_fails_the_throw_saying_so(session
     assert "out of both arms' reach" in result["throws"][0]["tree_reason"]
 
 
+#: Where the needle dropped while approaching entry 1 came to rest (flat, z up): in view and
+#: in PSM2's reach.
+ON_TISSUE = (-0.0172, 0.0052, 0.0717)
+
+
+@pytest.mark.slow
+def test_needle_dropped_in_the_hand_back_is_picked_up_for_the_later_pairs_not_inserted_again():
+    from suture_bt.behaviours.actions import grasp_for_pairs
+
+    session = Session(RunOptions(tree="multi_throw"))
+    try:
+        hand_back = node(session, "Hand back after pair 1")
+        assert session.run_until(lambda s: hand_back.status == Status.RUNNING) is not None
+        session.world.faults.drop("psm1")
+        # Test API: it came to rest flat, z up (a needle dropped from PSM1's presentation
+        # lands turned over, which no pick-up can use; see the turned-over test below).
+        session.world.needle.set_pose(_pose(_rot_z(-1.509), ON_TISSUE))
+        throw_2 = node(session, "Throw 2")
+        assert session.run_until(lambda s: throw_2.status == Status.RUNNING) is not None
+        assert session.context.throws[1]["status"] == "SUCCESS"
+        assert ran(session, "Retry: pair 1 after a drop") == [
+            (1, "Pair 1 (time limit)", Status.FAILURE),
+            (1, "Pick-up after a drop in pair 1 (time limit)", Status.SUCCESS),
+            (2, "Pair 1 (time limit)", Status.SUCCESS),
+        ]
+        assert "needle dropped by psm1" in node(session, "Retry: pair 1 after a drop").history[0][3]
+        skipped = node(session, "Unless pair 1 is pulled through").feedback_message
+        assert skipped.startswith("skipped: pair 1 pulled through at t = ")
+        assert node(session, "Unless PSM2 already holds it").feedback_message.startswith(
+            "skipped: psm2 already holds the needle"
+        )
+        reports = session.context.reports
+        assert [r["status"] for r in reports if r["behaviour"] == "Insert pair 1"] == ["SUCCESS"]
+        pick = next(r for r in reports if r["behaviour"] == "PSM2 picks the dropped needle up")
+        later = np.rad2deg(grasp_for_pairs((2, 3, 4))(session.context))
+        assert pick["status"] == "SUCCESS" and pick["arc_angle_deg"] == pytest.approx(later)
+        assert passed(session), session.scores()[0].failure
+    finally:
+        session.close()
+
+
+def test_a_needle_lying_turned_over_or_on_its_edge_is_refused_before_any_pick_up():
+    from suture_bt.geometry import NeedleModel, PhantomModel
+    from suture_bt.skills.base import SkillFailure
+    from suture_bt.skills.dropped import pick_up_path
+
+    ctx = SimpleNamespace(phantom=PhantomModel(), needle=NeedleModel())
+    flat = _pose(np.eye(4), ON_TISSUE)
+    assert len(pick_up_path(ctx, flat, 2.8)) == 3
+    with pytest.raises(SkillFailure, match="lying turned over"):
+        pick_up_path(ctx, flat @ _rot_x(np.pi), 2.8)
+    with pytest.raises(SkillFailure, match="standing on its edge"):
+        pick_up_path(ctx, flat @ _rot_x(np.deg2rad(80.0)), 2.8)
+
+
 @pytest.mark.parametrize("phi_deg", [0.0, 40.0, 90.0])
 def test_back_out_finds_the_sweep_angle_of_a_needle_on_its_arc(phi_deg):
     from suture_bt.geometry import NeedleModel, PhantomModel
@@ -156,6 +210,12 @@ def test_back_out_finds_the_sweep_angle_of_a_needle_on_its_arc(phi_deg):
     assert found == pytest.approx(phi, abs=np.deg2rad(1.0)) and turn < 1.0
     _, off = BackOut._sweep_angle(arc, arc.needle_pose(phi) @ _rot_x(np.deg2rad(20.0)))
     assert off > 15.0  # a needle off the arc's plane is refused (ON_ARC_DEG)
+
+
+def _pose(R: np.ndarray, p) -> np.ndarray:
+    T = np.array(R, dtype=float)
+    T[:3, 3] = p
+    return T
 
 
 def _rot_z(a: float) -> np.ndarray:

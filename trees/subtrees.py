@@ -61,7 +61,7 @@ from suture_bt.behaviours.throw_scope import ThrowScope
 #: Inserting arm (reaches the entries) and pulling arm (reaches the exits) of the SRC scene.
 INSERTER, PULLER = "psm2", "psm1"
 #: Simulated-time limits (s): preparation, one attempt of a throw, a pick-up after a drop.
-PREPARE_LIMIT, THROW_LIMIT, PICK_UP_LIMIT = 60.0, 45.0, 30.0
+PREPARE_LIMIT, THROW_LIMIT, PICK_UP_LIMIT = 60.0, 45.0, 40.0
 #: Retries of each recovery branch.
 RETRIES = 1
 
