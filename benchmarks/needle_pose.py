@@ -14,8 +14,15 @@ the holding arm's joints, which the benchmark scenes set exactly: the calibrated
 tolerance); ``--prior port`` an in-port prior in the in-port scenes (the port the scene put
 the needle in, 3 mm). Other scenes get none. ``wrong`` counts answers ≥ 2 mm or ≥ 5° off.
 
+The suture task's own views (issue 14; ``needle_task_scenes.py``): ``--set held_start``,
+``held_presented``, ``in_port``, ``handover`` (several may be given). Each scene of these sets
+is localised once without priors and, with ``--prior task`` (the default for them: ``both``),
+again with the task priors a caller knows there (reported as ``SET+prior``). ``wrong_rate`` =
+answers ≥ 2 mm or ≥ 5° off over all scenes; ``wall_ms_p95`` = p95 wall time of a localiser
+call per stereo frame, refusals included.
+
     python benchmarks/needle_pose.py [--json PATH] [--n 200] [--resolution 1920x1080]
-        [--prior none|held|port]
+        [--prior none|held|port|task|both] [--set SET ...]
 """
 
 from __future__ import annotations
@@ -25,6 +32,7 @@ import json
 import sys
 import time
 
+import needle_task_scenes
 import numpy as np
 import torch
 from scipy.spatial.transform import Rotation
@@ -101,7 +109,9 @@ def _draw_scene(sim: SimScene, cond: str, rng, i: int):
 #: Tolerances (m) of the benchmark's priors: held (exact joints) and in a port.
 HELD_PRIOR_TOL = 0.001
 PORT_PRIOR_TOL = 0.003
-PRIORS = ("none", "held", "port")
+PRIORS = ("none", "held", "port", "task", "both")
+#: Every set: the random-pose conditions, then the task's own views.
+SETS = ("unoccluded", "occluded", *needle_task_scenes.TASK_SETS)
 
 
 def _priors(sim: SimScene, s, kind: str) -> list:
@@ -201,6 +211,9 @@ def _summary(rows: list[dict]) -> dict:
     out["wrong_by_scenario"] = {
         k: sum(r["scenario"] == k for r in wrong) for k in sorted({r["scenario"] for r in wrong})
     }
+    walls = [r["wall_ms"] for r in rows if "wall_ms" in r]
+    if walls:
+        out["wall_ms_p95"] = float(np.percentile(walls, 95))
     out["prior_refusals"] = sum(
         1 for r in rows if not r["found"] and "no fitted pose" in r.get("reason", "")
     )
@@ -228,7 +241,11 @@ def _summary(rows: list[dict]) -> dict:
         "ends_decided_by": {
             k: sum(r["end_decided_by"] == k for r in est) for k in ("colour", "previous")
         },
-        "scenarios": {k: sum(r["scenario"] == k for r in rows) for k in sorted(SCEN_NAMES)},
+        "scenarios": {
+            k: n
+            for k in sorted({r["scenario"] for r in rows})
+            if (n := sum(r["scenario"] == k for r in rows))
+        },
         "by_scenario": _by_scenario(rows),
         "by_visible_share": _by_visible_share(rows),
         "mean_ang_err_mod_swap_deg": float(sym.mean()),
@@ -242,6 +259,38 @@ def _summary(rows: list[dict]) -> dict:
     }
 
 
+def _localize_row(loc, left, right, T_true, priors, R_swap) -> dict:
+    """One localiser call scored against the truth (a row's answer fields)."""
+    row: dict = {"prior": [type(p).__name__ for p in priors]}
+    t0 = time.perf_counter()
+    try:
+        est = loc.localize(left, right, priors=priors)
+    except NeedleNotFound as exc:
+        return row | {"found": False, "reason": exc.reason, "wall_ms": _ms(t0)}
+    pos, ang, t1 = _errors(est.T_cam_needle, T_true)
+    T_sw = T_true.copy()
+    T_sw[:3, :3] = T_true[:3, :3] @ R_swap
+    _, ang_sw, _ = _errors(est.T_cam_needle, T_sw)
+    return row | {
+        "found": True,
+        "wall_ms": _ms(t0),
+        "pos_mm": pos,
+        "ang_deg": ang,
+        "ang_sym_deg": min(ang, ang_sw),
+        "task1_mm": t1,
+        "rms_px": est.rms_px,
+        "inlier_fraction": est.inlier_fraction,
+        "end_decided_by": est.end_decided_by,
+        "angle_std_deg": est.angle_std_deg,
+        "position_std_mm": est.position_std_mm,
+        "ms": est.timings_ms,
+    }
+
+
+def _ms(t0: float) -> float:
+    return 1e3 * (time.perf_counter() - t0)
+
+
 def run(
     n: int,
     width: int,
@@ -253,6 +302,9 @@ def run(
     max_angle_std_deg: float = MAX_ANGLE_STD_DEG,
     prior: str = "none",
 ) -> dict:
+    """Results per set; the task sets under ``prior`` "both" (default for them when
+    ``prior`` is "none") give ``SET`` (no priors) and ``SET+prior`` (task priors) on the same
+    scenes; "task" only the latter."""
     torch.set_num_threads(threads)
     sim = SimScene(width, height)
     loc = NeedleLocalizer(sim.stereo, weights=weights, max_angle_std_deg=max_angle_std_deg)
@@ -261,52 +313,43 @@ def run(
     R_swap = Rotation.from_rotvec(np.pi * np.array([np.cos(mid), np.sin(mid), 0.0])).as_matrix()
     results = {}
     try:
-        for ci, cond in enumerate(("unoccluded", "occluded")):
+        for ci, cond in enumerate(SETS):
             if cond not in conditions:
                 continue
-            rows = []
+            task = cond in needle_task_scenes.TASK_SETS
+            modes = {"none": ("none",), "task": ("task",)}.get(prior, ("none", "task"))
+            modes = modes if task else ((prior if prior not in ("task", "both") else "none"),)
+            rows: dict[str, list] = {m: [] for m in modes}
             bar = tqdm(range(n), desc=f"{cond} {width}x{height}")
             for i in bar:
                 rng = np.random.default_rng([seed, ci, i])
-                s, left, frac, draws = _draw_scene(sim, cond, rng, i)
+                if task:
+                    s, task_priors = needle_task_scenes.BUILDERS[cond](sim, rng)
+                    sim.apply(s)
+                    left, mask = sim.render("left", s, rng)
+                    frac, draws = _visible_fraction(sim, s, mask), 1
+                else:
+                    s, left, frac, draws = _draw_scene(sim, cond, rng, i)
                 right, _ = sim.render("right", s, rng)
                 T_true = invert(sim.stereo.left.T_world_cam) @ s.T_world_needle
-                row = {
+                base = {
                     "scenario": s.scenario,
                     "visible": frac,
                     "depth_mm": T_true[2, 3] * 1e3,
                     "draws": draws,
                 }
-                try:
-                    priors = _priors(sim, s, prior)
-                    row["prior"] = [type(p).__name__ for p in priors]
-                    est = loc.localize(left, right, priors=priors)
-                    pos, ang, t1 = _errors(est.T_cam_needle, T_true)
-                    T_sw = T_true.copy()
-                    T_sw[:3, :3] = T_true[:3, :3] @ R_swap
-                    _, ang_sw, _ = _errors(est.T_cam_needle, T_sw)
-                    row |= {
-                        "found": True,
-                        "pos_mm": pos,
-                        "ang_deg": ang,
-                        "ang_sym_deg": min(ang, ang_sw),
-                        "task1_mm": t1,
-                        "rms_px": est.rms_px,
-                        "end_decided_by": est.end_decided_by,
-                        "angle_std_deg": est.angle_std_deg,
-                        "position_std_mm": est.position_std_mm,
-                        "ms": est.timings_ms,
-                    }
-                except NeedleNotFound as exc:
-                    row |= {"found": False, "reason": exc.reason}
-                rows.append(row)
-                ok = [r for r in rows if r["found"]]
+                for m in modes:
+                    pr = (task_priors if m == "task" else []) if task else _priors(sim, s, m)
+                    rows[m].append(base | _localize_row(loc, left, right, T_true, pr, R_swap))
+                ok = [r for r in rows[modes[0]] if r["found"]]
                 if ok:
                     bar.set_postfix(
                         med_pos=f"{np.median([r['pos_mm'] for r in ok]):.2f}",
                         med_ang=f"{np.median([r['ang_deg'] for r in ok]):.1f}",
                     )
-            results[cond] = _summary(rows) | {"per_scene": rows}
+            for m in modes:
+                key = f"{cond}+prior" if task and m == "task" else cond
+                results[key] = _summary(rows[m]) | {"per_scene": rows[m]}
     finally:
         sim.close()
     return results
@@ -322,6 +365,9 @@ def main(argv=None) -> int:
     ap.add_argument("--threads", type=int, default=1, help="torch threads (default 1)")
     ap.add_argument("--only", choices=["unoccluded", "occluded"], help="run one condition")
     ap.add_argument(
+        "--set", nargs="+", choices=SETS, help="sets to run (default: unoccluded occluded)"
+    )
+    ap.add_argument(
         "--max-angle-std-deg",
         type=float,
         default=MAX_ANGLE_STD_DEG,
@@ -329,12 +375,16 @@ def main(argv=None) -> int:
         f"{MAX_ANGLE_STD_DEG}; inf answers every fit)",
     )
     ap.add_argument(
-        "--prior", choices=PRIORS, default="none", help="task prior for held / in-port scenes"
+        "--prior",
+        choices=PRIORS,
+        default="both",
+        help="random sets: held / port priors in held / in-port scenes (task, both: none); "
+        "task sets: both (default: without and with the task priors), task or none",
     )
     args = ap.parse_args(argv)
     w, h = (int(v) for v in args.resolution.lower().split("x"))
     t0 = time.time()
-    conds = (args.only,) if args.only else ("unoccluded", "occluded")
+    conds = tuple(args.set) if args.set else (args.only,) if args.only else SETS[:2]
     res = run(
         args.n,
         w,

@@ -55,3 +55,28 @@ def test_tiny_run_localizes_an_unoccluded_scene_at_1080p():
     assert row["found"] and row["pos_mm"] < 2.0 and row["ang_deg"] < 5.0
     assert 0 < row["angle_std_deg"] <= needle_pose.MAX_ANGLE_STD_DEG
     assert res["unoccluded"]["success_rate"] == 1.0
+
+
+def test_task_sets_build_scenes_whose_priors_hold_at_the_truth():
+    """Each task set's scene puts the needle in front of the cameras, held where its holder's
+    pinch point is (and through its ports in a port), so the task priors are true ones."""
+    import needle_task_scenes  # noqa: E402
+
+    from suture_bt.datagen.needle_data import SimScene  # noqa: E402
+    from suture_bt.perception.needle_prior import consistent, prior_misses  # noqa: E402
+
+    sim = SimScene(640, 480)
+    try:
+        for k, name in enumerate(needle_task_scenes.TASK_SETS):
+            for i in range(3):
+                rng = np.random.default_rng([7, k, i])
+                s, priors = needle_task_scenes.BUILDERS[name](sim, rng)
+                assert s.scenario == name and priors
+                misses = prior_misses(priors, s.T_world_needle[None], sim.model)
+                assert consistent(misses).all(), (name, i, misses)
+                z = (sim.stereo.left.T_cam_world @ s.T_world_needle)[2, 3]
+                assert 0.02 < z < 0.2, (name, z)
+                if name == "in_port":
+                    assert any(type(p).__name__ == "PortPrior" for p in priors)
+    finally:
+        sim.close()

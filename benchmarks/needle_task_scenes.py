@@ -1,0 +1,229 @@
+"""The suture task's own needle views for the needle-pose benchmark (issue 14, "Measure").
+
+Each builder draws one scene (a :class:`~suture_bt.datagen.needle_data.SceneSample`: true arm
+joints, needle pose) through the simulator's own kinematics and the skills' own geometry, plus
+the task priors a caller would know there:
+
+- ``held_start``: the SRC Task 3 start. PSM2 at the default initial joints, driven there with
+  a hidden joint offset drawn within the task bound (5°, 5°, 5 mm on joints 1-3), the needle
+  in its jaw at a grasp arc angle drawn in 57-180° (the world's own in-jaw hand); PSM1 at its
+  own default pose with its own offset.
+- ``held_presented``: a presentation pose the tree uses (``skills.presentation``: one of the
+  first three candidates for the arm's view), either arm, the driving hand at a random arc
+  angle or the pulling hand; the other arm at its default pose.
+- ``in_port``: the needle partly inserted along the planned arc of a random pair
+  (``suture_bt.planning.plan_needle_arc``), swept so that its tip has emerged at the exit
+  (0.3 mm to the insertion's end), held by PSM2 at the insertion grasp
+  (``skills.grasps.insertion_grasp_angle``), or by PSM1 at the pulling hand from the
+  insertion's end until the base is 0.3 rad short of the exit (pulling through).
+- ``handover``: the giver presents the needle (as ``held_presented``); the taker's jaw comes
+  in along its length toward its grasp at another arc angle (at least the skills'
+  ``MIN_JAW_SEPARATION`` away), 0-20 mm back (the handover's stand-by distance), open, or
+  closed on the wire at 0 mm.
+
+Priors (``task``): held by the holder at its pinch point from its joints; the arms in these
+scenes are where their joints say once calibrated, so the tolerance is the calibrated 1 mm
+(``held_start``: the joints the arm *reports*, i.e. commanded, would be off by the hidden
+offset; the benchmark gives the calibrated pinch point, as the tree localises after
+calibrating); in a port also the entry and exit ports (3 mm).
+"""
+
+from __future__ import annotations
+
+from types import SimpleNamespace
+
+import numpy as np
+
+from suture_bt.datagen.needle_data import SceneSample
+from suture_bt.kinematics import UnreachablePoseError, forward_kinematics, inverse_kinematics
+from suture_bt.perception.in_hand import JAW_POINT_IN_TIP
+from suture_bt.perception.needle_prior import HeldPrior, PortPrior, arc_distance
+from suture_bt.planning import plan_needle_arc, to_base
+from suture_bt.skills import presentation
+from suture_bt.skills.grasps import (
+    END_MARGIN,
+    MIN_JAW_SEPARATION,
+    backed_off,
+    hand,
+    insertion_grasp_angle,
+    pulling_hand,
+    tip_goal,
+)
+
+TASK_SETS = ("held_start", "held_presented", "in_port", "handover")
+#: Default initial joints of the SRC scene (sim/default_scene.yaml).
+INITIAL_JP = {
+    "psm1": np.array([0.4, -0.22, 0.139, 1.64, -0.37, 0.11]),
+    "psm2": np.array([-0.4, -0.22, 0.139, -1.64, -0.37, -0.11]),
+}
+#: Task bound of the hidden joint offset (rad, rad, m).
+OFFSET_BOUND = np.array([np.deg2rad(5.0), np.deg2rad(5.0), 0.005])
+HELD_TOL = 0.001
+PORT_TOL = 0.003
+JAW_CLOSED = 0.0
+JAW_OPEN = 0.8
+
+
+def _other(arm: str) -> str:
+    return "psm1" if arm == "psm2" else "psm2"
+
+
+def _with_offset(q: np.ndarray, rng) -> np.ndarray:
+    q = np.array(q, float)
+    q[:3] += rng.uniform(-OFFSET_BOUND, OFFSET_BOUND)
+    return q
+
+
+def _sample(scenario, T, q, jaw, rng) -> SceneSample:
+    return SceneSample(
+        scenario,
+        T,
+        q,
+        jaw,
+        brightness=float(rng.uniform(0.8, 1.6)),
+        noise_std=float(rng.uniform(0.0, 4.0)),
+    )
+
+
+def _tip(sim, arm: str, q: np.ndarray) -> np.ndarray:
+    return sim.sampler.bases[arm] @ forward_kinematics(q)
+
+
+def _pinch(T_tip: np.ndarray) -> np.ndarray:
+    return T_tip[:3, :3] @ JAW_POINT_IN_TIP + T_tip[:3, 3]
+
+
+class _Arm:
+    """The bits of an ArmHandle that ``skills.presentation`` reads (a calibrated arm)."""
+
+    calibrated = True
+
+    def __init__(self, name: str, base: np.ndarray, q: np.ndarray):
+        self.name = name
+        self._base = base
+        self.servo = SimpleNamespace(setpoint_jp=lambda: q.copy(), estimated_jp=lambda: q.copy())
+
+    def base_frame(self) -> np.ndarray:
+        return self._base
+
+
+def _ctx(sim):
+    return SimpleNamespace(
+        camera=SimpleNamespace(model=sim.stereo),
+        phantom=sim.world.task.phantom,
+        needle=sim.model,
+        belief=None,
+    )
+
+
+def _ik(sim, arm: str, T_world_tip: np.ndarray, q_now: np.ndarray) -> np.ndarray | None:
+    try:
+        return inverse_kinematics(to_base(T_world_tip, sim.sampler.bases[arm]), q_now)
+    except UnreachablePoseError:
+        return None
+
+
+def _random_hand(sim, rng) -> np.ndarray:
+    m = sim.model
+    if rng.random() < 0.3:
+        return pulling_hand(m)
+    return hand(m, rng.uniform(m.tip_angle + END_MARGIN, m.base_angle - END_MARGIN))
+
+
+def _presented(sim, rng, arm: str, T_hand: np.ndarray):
+    """Joints presenting a needle held with ``T_hand`` (one of the first 3 candidates)."""
+    cands = presentation.candidate_poses(
+        _ctx(sim), _Arm(arm, sim.sampler.bases[arm], INITIAL_JP[arm])
+    )[:3]
+    if not cands:
+        return None
+    T_tip = cands[int(rng.integers(len(cands)))]
+    q = _ik(sim, arm, T_tip, INITIAL_JP[arm])
+    return None if q is None else (q, T_tip @ T_hand)
+
+
+def held_start(sim, rng):
+    a = np.deg2rad(rng.uniform(57.0, 180.0))
+    q = {arm: _with_offset(INITIAL_JP[arm], rng) for arm in ("psm1", "psm2")}
+    m = sim.model
+    # The world's in-jaw hand (sim.world.World.in_jaw_grasp_pose) = the skills' driving hand.
+    T = _tip(sim, "psm2", q["psm2"]) @ hand(m, a)
+    jaw = {"psm1": 0.5, "psm2": JAW_CLOSED}
+    priors = [HeldPrior("psm2", _pinch(_tip(sim, "psm2", q["psm2"])), HELD_TOL)]
+    return _sample("held_start", T, q, jaw, rng), priors
+
+
+def held_presented(sim, rng):
+    for _ in range(50):
+        arm = ("psm1", "psm2")[int(rng.integers(2))]
+        got = _presented(sim, rng, arm, _random_hand(sim, rng))
+        if got is None:
+            continue
+        q_arm, T = got
+        q = {arm: q_arm, _other(arm): INITIAL_JP[_other(arm)].copy()}
+        jaw = {arm: JAW_CLOSED, _other(arm): 0.5}
+        priors = [HeldPrior(arm, _pinch(_tip(sim, arm, q_arm)), HELD_TOL)]
+        return _sample("held_presented", T, q, jaw, rng), priors
+    raise RuntimeError("no reachable presentation in 50 draws")
+
+
+def in_port(sim, rng):
+    m = sim.model
+    ph = sim.world.task.phantom
+    for _ in range(100):
+        pair = int(rng.integers(1, ph.num_pairs + 1))
+        entry, exit_ = ph.pair(pair)
+        arc = plan_needle_arc(entry, exit_, m)
+        if rng.random() < 0.5:  # inserting: tip just out to the insertion's end
+            arm, T_hand = "psm2", hand(m, insertion_grasp_angle(arc))
+            phi = rng.uniform(arc.port_angle + 0.0003 / m.radius, arc.insert_end_angle)
+        else:  # pulling through: from the insertion's end until the base nears the exit
+            arm, T_hand = "psm1", pulling_hand(m)
+            phi = rng.uniform(arc.insert_end_angle, arc.base_at_exit_angle - 0.3)
+        T = arc.needle_pose(phi)
+        q_arm = _ik(sim, arm, tip_goal(T, T_hand), INITIAL_JP[arm])
+        if q_arm is None:
+            continue
+        q = {arm: q_arm, _other(arm): INITIAL_JP[_other(arm)].copy()}
+        jaw = {arm: JAW_CLOSED, _other(arm): 0.5}
+        priors = [HeldPrior(arm, _pinch(_tip(sim, arm, q_arm)), HELD_TOL)]
+        for port in (entry, exit_):
+            if arc_distance(port.position, T, m) <= PORT_TOL:
+                priors.append(PortPrior(port.name, port.position, PORT_TOL))
+        return _sample("in_port", T, q, jaw, rng), priors
+    raise RuntimeError("no reachable in-port grasp in 100 draws")
+
+
+def handover(sim, rng):
+    m = sim.model
+    for _ in range(100):
+        giver = ("psm1", "psm2")[int(rng.integers(2))]
+        taker = _other(giver)
+        a_give = rng.uniform(m.tip_angle + END_MARGIN, m.base_angle - END_MARGIN)
+        got = _presented(sim, rng, giver, hand(m, a_give))
+        if got is None:
+            continue
+        q_give, T = got
+        angles = np.linspace(m.tip_angle + END_MARGIN, m.base_angle - END_MARGIN, 40)
+        angles = angles[np.abs(angles - a_give) >= MIN_JAW_SEPARATION]
+        if not len(angles):
+            continue
+        a_take = float(rng.choice(angles))
+        d = float(rng.choice([0.0, rng.uniform(0.0, 0.02)]))
+        T_take = backed_off(tip_goal(T, hand(m, a_take, pulling=bool(rng.integers(2)))), d)
+        q_take = _ik(sim, taker, T_take, INITIAL_JP[taker])
+        if q_take is None:
+            continue
+        q = {giver: q_give, taker: q_take}
+        jaw = {giver: JAW_CLOSED, taker: JAW_CLOSED if d == 0.0 else JAW_OPEN}
+        priors = [HeldPrior(giver, _pinch(_tip(sim, giver, q_give)), HELD_TOL)]
+        return _sample("handover", T, q, jaw, rng), priors
+    raise RuntimeError("no reachable handover in 100 draws")
+
+
+BUILDERS = {
+    "held_start": held_start,
+    "held_presented": held_presented,
+    "in_port": in_port,
+    "handover": handover,
+}
