@@ -36,3 +36,29 @@ def test_uncompensated_offset_biases_the_in_hand_transform():
 def test_bad_input_is_rejected():
     with pytest.raises(ValueError, match="measured_cp"):
         in_hand_transform(np.eye(4), np.full((4, 4), np.nan), np.eye(4))
+
+
+def test_uncalibrated_estimate_says_it_holds_only_where_measured():
+    model = NeedleModel()
+    cp = forward_kinematics(Q)
+    T_world_needle = BASE @ cp @ grasp_transform(model, 2.6, flip=False)
+    moved = forward_kinematics(Q + np.array([0.05, 0, 0, 0, 0, 0]))
+    unknown = estimate_in_hand(T_world_needle, cp, BASE, model)
+    assert (
+        unknown.valid_only_where_measured and unknown.valid_at(cp) and not unknown.valid_at(moved)
+    )
+    calibrated = estimate_in_hand(T_world_needle, cp, BASE, model, calibrated=True)
+    assert not calibrated.valid_only_where_measured and calibrated.valid_at(moved)
+
+
+def test_uncalibrated_margin_keeps_a_correct_estimate_plausible():
+    """The offset's tip error, given in the margin, no longer reads as an implausible grasp."""
+    model = NeedleModel()
+    true_cp = forward_kinematics(Q)
+    T_world_needle = BASE @ true_cp @ grasp_transform(model, 2.6, flip=False)
+    measured_cp = forward_kinematics(Q - np.array([np.deg2rad(2.0), 0, 0.003, 0, 0, 0]))
+    from suture_bt.skills.tip_uncertainty import worst_offset_displacement
+
+    margin = 0.001 + worst_offset_displacement(Q)
+    est = estimate_in_hand(T_world_needle, measured_cp, BASE, model, margin, calibrated=False)
+    assert est.plausible and est.valid_only_where_measured

@@ -20,14 +20,51 @@ from suture_bt.transforms import invert
 JAW_POINT_IN_TIP = np.array([0.0, 0.0, -0.0015])
 
 
+#: Tip moves (m, rad) within which an uncalibrated arm's in-hand estimate still holds: the
+#: hidden offset it absorbed changes with the configuration, so it is only valid where it was
+#: measured (a few tenths of a millimetre of tip error per millimetre moved is typical).
+SAME_POSE_POSITION = 0.001
+SAME_POSE_ANGLE = np.deg2rad(1.0)
+
+
 @dataclass(frozen=True)
 class InHandEstimate:
-    """Needle pose in the tip frame, the arc angle at the jaw and how plausible the grasp is."""
+    """Needle pose in the tip frame, the arc angle at the jaw and how plausible the grasp is.
+
+    What it absorbs: the transform is taken against the arm's *reported* tip pose. Unless the
+    arm is calibrated (its joint offset compensated), it holds the true grasp composed with
+    the tip error of the hidden offset at ``measured_cp`` (DESIGN.md §5: millimetres), so it is
+    valid only at the pose where it was measured (:meth:`valid_at`); ``calibrated`` None
+    means the caller did not say, and is treated as uncalibrated. ``plausible`` compares the
+    wire's distance from the jaw's pinch point with ``max_jaw_distance``, which for an
+    uncalibrated arm must include the offset's worst tip displacement (else a correct
+    estimate reads implausible).
+    """
 
     T_tip_needle: np.ndarray
     grasp_arc_angle: float
     jaw_distance: float
     plausible: bool
+    calibrated: bool | None = None
+    #: The reported tip pose (arm base frame) the estimate was measured at.
+    measured_cp: np.ndarray | None = None
+
+    @property
+    def valid_only_where_measured(self) -> bool:
+        """True unless the arm was calibrated: the absorbed offset error moves with the arm."""
+        return self.calibrated is not True
+
+    def valid_at(self, measured_cp: np.ndarray) -> bool:
+        """Whether the estimate applies with the arm's reported tip pose ``measured_cp``: always
+        for a calibrated arm, else only within ``SAME_POSE_*`` of where it was measured."""
+        if not self.valid_only_where_measured:
+            return True
+        if self.measured_cp is None:
+            return False
+        M = np.asarray(measured_cp, float)
+        dp = float(np.linalg.norm(M[:3, 3] - self.measured_cp[:3, 3]))
+        c = (np.trace(self.measured_cp[:3, :3].T @ M[:3, :3]) - 1.0) / 2.0
+        return dp <= SAME_POSE_POSITION and float(np.arccos(np.clip(c, -1, 1))) <= SAME_POSE_ANGLE
 
 
 def in_hand_transform(
@@ -46,13 +83,23 @@ def estimate_in_hand(
     T_world_base: np.ndarray,
     model: NeedleModel | None = None,
     max_jaw_distance: float = 0.003,
+    calibrated: bool | None = None,
 ) -> InHandEstimate:
     """The in-hand transform plus the grasped arc angle; implausible if the wire is far
-    (> ``max_jaw_distance``) from the point between the jaws."""
+    (> ``max_jaw_distance``) from the point between the jaws. ``calibrated``: whether the
+    arm's offset is compensated (see :class:`InHandEstimate` for what an uncalibrated one
+    absorbs)."""
     model = model or NeedleModel()
     T = in_hand_transform(T_world_needle, measured_cp, T_world_base)
     jaw_in_needle = invert(T)[:3, :3] @ JAW_POINT_IN_TIP + invert(T)[:3, 3]
     angles = np.linspace(model.tip_angle, model.base_angle, 721)
     d = np.linalg.norm(model.point_at(angles) - jaw_in_needle, axis=1)
     i = int(np.argmin(d))
-    return InHandEstimate(T, float(angles[i]), float(d[i]), bool(d[i] <= max_jaw_distance))
+    return InHandEstimate(
+        T,
+        float(angles[i]),
+        float(d[i]),
+        bool(d[i] <= max_jaw_distance),
+        calibrated,
+        np.array(measured_cp, dtype=float),
+    )
