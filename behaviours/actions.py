@@ -14,6 +14,7 @@ from suture_bt.skills.dropped import FindDropped
 from suture_bt.skills.extract import Extract
 from suture_bt.skills.grasps import free_angle, held_arc_angle, insertion_grasp_angle
 from suture_bt.skills.handover import Handover
+from suture_bt.skills.in_hand_check import CheckInHand
 from suture_bt.skills.insert import Insert
 from suture_bt.skills.localize_needle import LocalizeNeedle
 from suture_bt.skills.pick_up import PickUp
@@ -117,6 +118,18 @@ class PickUpNeedle(SkillBehaviour):
 
     def make_skill(self):
         return PickUp(self.context, self.arm, self.angle(self.context))
+
+
+class CheckNeedleInHand(SkillBehaviour):
+    """Before inserting: the needle seen over the entry where its in-hand pose says (else it
+    slipped, and the in-hand pose is re-estimated)."""
+
+    def __init__(self, arm: str, pair: int, name: str | None = None):
+        super().__init__(name or f"Needle still as held? (pair {pair})")
+        self.arm, self.pair = arm, pair
+
+    def make_skill(self):
+        return CheckInHand(self.context, self.arm, self.pair)
 
 
 class FindDroppedNeedle(SkillBehaviour):

@@ -17,7 +17,9 @@ from py_trees.common import Status
 
 from suture_bt.behaviours.actions import AngleRule, grasp_for_pairs
 from suture_bt.behaviours.skill_behaviour import needs
+from suture_bt.planning import NeedleArcError, plan_needle_arc
 from suture_bt.skills.context import TaskContext
+from suture_bt.skills.grasps import JAW_CLEARANCE
 
 #: Says why a step is already done ('' when it is not).
 DoneCheck = Callable[[TaskContext], str]
@@ -76,6 +78,27 @@ def holds_needle(arm: str) -> DoneCheck:
         if b is None or b.holder != arm or b.T_tip_needle is None:
             return ""
         return f"{arm} already holds the needle (source {b.source})"
+
+    return check
+
+
+def grasp_leaves_room(pair: int, arm: str) -> DoneCheck:
+    """'' when ``arm``'s believed grasp fails the planner's grasp limit for ``pair`` (too close
+    to the tip: a re-grasp is needed); anything else is left to the insertion to judge."""
+
+    def check(ctx: TaskContext) -> str:
+        b = ctx.belief
+        if b is None or b.holder != arm or b.T_tip_needle is None:
+            return f"{arm} is not known to hold the needle (the insertion says so)"
+        try:
+            arc = plan_needle_arc(*ctx.phantom.pair(pair), ctx.needle)
+        except NeedleArcError as e:
+            return f"no circle through pair {pair} ({e.reason}; the insertion says so)"
+        try:
+            arc.check_grasp(b.T_tip_needle, JAW_CLEARANCE)
+        except NeedleArcError:
+            return ""
+        return f"{arm}'s grasp leaves the tip room for pair {pair}"
 
     return check
 

@@ -184,6 +184,34 @@ def test_needle_dropped_in_the_hand_back_is_picked_up_for_the_later_pairs_not_in
         session.close()
 
 
+@pytest.mark.slow
+def test_a_needle_slipped_on_the_way_to_the_entry_is_re_estimated_and_re_grasped(session):
+    # Before this branch the slipped needle (4 mm toward the tip, 5° turn) was driven with
+    # the old in-hand pose: the emerged tip was not confirmed, the needle backed out, was
+    # re-localised and then failed the planner's grasp limit (a stab scored at entry 1).
+    check = "Needle still as held? (pair 1)"
+    assert session.run_until(running(session, check, "bringing the needle")) is not None
+    event = session.world.faults.slip("psm2", angle_deg=5.0, slide_mm=4.0)
+    true_now = event.params["held_arc_deg"][1]
+    throw = finish(session)
+    reports = session.context.reports
+    seen = next(r for r in reports if r["behaviour"] == check)
+    assert seen["status"] == "SUCCESS" and seen["slipped"], seen.get("detail")
+    was, now = seen["held_arc_deg"]
+    assert was - now > 15.0 and abs(now - true_now) < 5.0  # re-estimated from images
+    skip = node(session, "Unless the grasp leaves the tip room (pair 1)")
+    assert skip.status == Status.SUCCESS and not skip.skipped  # the grasp limit failed
+    handovers = [r for r in reports if r["skill"] == "hand over" and r["t_start"] >= seen["t_end"]]
+    assert [(r["behaviour"], r["status"]) for r in handovers] == [
+        ("PSM2 hands the slipped needle to PSM1 (pair 1)", "SUCCESS"),
+        ("PSM1 hands it back for pair 1", "SUCCESS"),
+    ]
+    assert [r["status"] for r in reports if r["skill"] == "insert"] == ["SUCCESS"]
+    assert not any(r["skill"] == "back out" for r in reports)
+    assert throw["status"] == "SUCCESS", throw["reason"]
+    assert passed(session), session.scores()[0].failure
+
+
 def test_a_needle_lying_turned_over_or_on_its_edge_is_refused_before_any_pick_up():
     from suture_bt.geometry import NeedleModel, PhantomModel
     from suture_bt.skills.base import SkillFailure

@@ -9,7 +9,12 @@ from py_trees.behaviours import StatusQueue
 from py_trees.common import Status
 
 from suture_bt.behaviours.recovery import RecoveryNode
-from suture_bt.behaviours.throw_progress import SkipWhen, holds_needle, pulled_through
+from suture_bt.behaviours.throw_progress import (
+    SkipWhen,
+    grasp_leaves_room,
+    holds_needle,
+    pulled_through,
+)
 from suture_bt.behaviours.throw_scope import failure_reason
 from suture_bt.skills.context import NeedleBelief
 
@@ -96,3 +101,21 @@ def test_a_recovery_whose_guard_refused_leaves_the_attempts_reason():
     node, action = _blaming(False)
     assert node.status == F and action.status == F
     assert failure_reason(node) == "attempt: needle dropped by psm2"
+
+
+def test_grasp_leaves_room_reads_the_planners_grasp_limit():
+    from suture_bt.geometry import NeedleModel, PhantomModel
+    from suture_bt.planning import plan_needle_arc
+    from suture_bt.skills.grasps import hand, insertion_grasp_angle
+
+    phantom, needle = PhantomModel(), NeedleModel()
+    good = insertion_grasp_angle(plan_needle_arc(*phantom.pair(1), needle))
+
+    def ctx(angle):
+        held = NeedleBelief(np.eye(4), 0.0, "vision", "psm2", hand(needle, angle))
+        return SimpleNamespace(phantom=phantom, needle=needle, belief=held)
+
+    check = grasp_leaves_room(1, "psm2")
+    assert check(ctx(good)) == "psm2's grasp leaves the tip room for pair 1"
+    assert check(ctx(good - np.deg2rad(22.0))) == ""  # slid 4 mm toward the tip: re-grasp
+    assert "not known to hold" in grasp_leaves_room(1, "psm1")(ctx(good))

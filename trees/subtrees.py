@@ -28,6 +28,7 @@ from suture_bt.behaviours import blackboard_keys as keys
 from suture_bt.behaviours.actions import (
     BackOutNeedle,
     Calibrate,
+    CheckNeedleInHand,
     ExtractNeedle,
     FindDroppedNeedle,
     HandOver,
@@ -53,6 +54,7 @@ from suture_bt.behaviours.sim_timeout import SimTimeout
 from suture_bt.behaviours.throw_progress import (
     SkipWhen,
     grasp_for_remaining,
+    grasp_leaves_room,
     holds_needle,
     pulled_through,
 )
@@ -189,6 +191,36 @@ def retried_extraction(pair: int) -> py_trees.behaviour.Behaviour:
     )
 
 
+def regrasp(pair: int, later_pairs: tuple[int, ...]) -> py_trees.behaviour.Behaviour:
+    """PSM2's grasp (after a slip) leaves the tip too little room: PSM1 takes the needle and
+    hands it back at the grasp the pairs from ``pair`` on need."""
+    grasp = grasp_for_pairs((pair, *later_pairs))
+    return py_trees.composites.Sequence(
+        f"Re-grasp for pair {pair}: PSM2 → PSM1 → PSM2",
+        memory=True,
+        children=[
+            retried_handover(
+                HandOver(
+                    INSERTER,
+                    PULLER,
+                    away_from_holder_and(grasp),
+                    pulling=True,
+                    name=f"PSM2 hands the slipped needle to PSM1 (pair {pair})",
+                )
+            ),
+            retried_handover(
+                HandOver(
+                    PULLER,
+                    INSERTER,
+                    grasp,
+                    next_pair=pair,
+                    name=f"PSM1 hands it back for pair {pair}",
+                )
+            ),
+        ],
+    )
+
+
 def picked_up_again(pair: int, later_pairs: tuple[int, ...]) -> py_trees.behaviour.Behaviour:
     """After a drop: let go, find the needle where it fell, and PSM2 picks it up at the grasp
     the pairs still to do need (fails saying why when it cannot: in the tissue, on its edge,
@@ -215,6 +247,12 @@ def throw(pair: int, later_pairs: tuple[int, ...]) -> py_trees.behaviour.Behavio
         memory=True,
         children=[
             NeedleLocalised(INSERTER, name="Needle in PSM2's hand?"),
+            CheckNeedleInHand(INSERTER, pair),
+            SkipWhen(
+                f"Unless the grasp leaves the tip room (pair {pair})",
+                regrasp(pair, later_pairs),
+                grasp_leaves_room(pair, INSERTER),
+            ),
             retried_insertion(pair),
             retried_extraction(pair),
         ],
