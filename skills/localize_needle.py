@@ -26,7 +26,7 @@ from suture_bt.skills.tip_uncertainty import worst_offset_displacement
 HOLD_TOLERANCE_CALIBRATED = 0.002
 HOLD_MARGIN_UNCALIBRATED = 0.004
 #: Presentation poses tried before giving up.
-MAX_PRESENTATIONS = 3
+MAX_PRESENTATIONS = 5
 
 
 class LocalizeNeedle(Skill):
