@@ -145,3 +145,17 @@ class NeedleDropped(_Condition):
     def ask(self) -> tuple[bool, str]:
         arm, why = dropped_by(self.context)
         return arm is not None, why
+
+
+class CalibrationLost(_Condition):
+    """The guard of the recalibration: ``arm`` was calibrated, and a check has since found
+    its calibration no longer holds (marked lost)."""
+
+    def __init__(self, arm: str, name: str | None = None):
+        super().__init__(name or f"{arm.upper()}'s calibration lost?")
+        self.arm = arm
+
+    def ask(self) -> tuple[bool, str]:
+        a = self.context.arm(self.arm)
+        lost = a.offset_estimate is not None and not a.calibrated
+        return lost, f"{self.arm}'s calibration " + ("lost" if lost else "holds")

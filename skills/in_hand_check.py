@@ -7,14 +7,20 @@ the images can. The inserting arm brings the needle to where the insertion's app
 the pose the belief's in-hand transform predicts. Agreeing (``checks.poses_agree``), the
 in-hand estimate stands unchanged; disagreeing, the needle slipped: the fresh estimate becomes
 the in-hand transform and the report says ``slipped`` (the tree then checks the planner's
-grasp limit on it and re-grasps when it leaves the tip too little room). A needle that no view
-localises keeps its estimate, and the report says it was not re-checked.
+grasp limit on it and re-grasps when it leaves the tip too little room). A needle seen off the
+calibrated arm's pinch point cannot have slipped (a slip keeps the wire between the blades):
+the arm is not where its calibration says, its offset drifted; the calibration is marked lost
+and the skill fails saying so (the tree recalibrates). A view whose answer the held-by test
+refuses (the wire off the pinch point) is that evidence already: the needle is then not
+presented (a drifted arm believed calibrated presented it into the ridge). A needle that no
+view localises keeps its estimate, and the report says it was not re-checked.
 """
 
 from __future__ import annotations
 
 import numpy as np
 
+from suture_bt.perception.in_hand import estimate_in_hand
 from suture_bt.skills import checks
 from suture_bt.skills.base import Skill, SkillFailure, Waiting
 from suture_bt.skills.context import TaskContext
@@ -24,6 +30,15 @@ from suture_bt.skills.line_of_sight import clear_tip_pose
 from suture_bt.skills.localize_needle import LocalizeNeedle
 from suture_bt.skills.motion import feasible, move_to, together
 from suture_bt.transforms import invert
+
+#: A calibrated arm whose held wire is seen this far from its pinch point, and the needle this
+#: far from the prediction, has drifted (m): a slip turns and slides the needle in the jaw but
+#: keeps the wire between the blades. (No-fault checks: 0.3-0.6 mm from the prediction.)
+DRIFT_JAW, DRIFT_POSITION = 0.0012, 0.0015
+#: A second view is taken this far above the first (m), before the needle is presented (a
+#: drifted arm, still believed calibrated, presented it 1.7-2.5 mm into the ridge); a drifted
+#: arm rises as far before the handover that empties its jaw (else 1.3 mm into the flank).
+RISE = 0.020
 
 
 class CheckInHand(Skill):
@@ -52,14 +67,24 @@ class CheckInHand(Skill):
             raise SkillFailure(
                 f"{where}: entry out of {self.arm_name}'s reach: {e.reason}"
             ) from None
-        seen = yield from self._look()
+        seen, off_grasp = yield from self._look()
         predicted = arm.tip_world() @ T_gn  # where the arm stands when it looked
+        if seen is None and off_grasp and arm.calibrated:
+            yield from self._rise()
+            self._drifted(arm, kept, f"seen off its pinch point: {off_grasp[-1]}")
         if seen is None:
             ctx.belief = kept
             self.report["checked"] = False
             self.say(f"{where}: in-hand pose not re-checked (no view localised the needle)")
             return
         ok, detail = checks.poses_agree(seen.T_world_needle, predicted)
+        jaw = self._jaw_distance(arm, seen.T_world_needle)
+        dp = float(np.linalg.norm(seen.T_world_needle[:3, 3] - predicted[:3, 3]))
+        self.report.update(jaw_distance_mm=1e3 * jaw, off_prediction_mm=1e3 * dp)
+        if arm.calibrated and jaw > DRIFT_JAW and dp > DRIFT_POSITION:
+            where_seen = f"wire {1e3 * jaw:.1f} mm from its pinch point, {detail}"
+            yield from self._rise()
+            self._drifted(arm, kept, where_seen)
         self.report.update(checked=True, slipped=not ok, detail=detail)
         if ok:
             ctx.belief = kept  # the estimate the grasp was confirmed with stands
@@ -72,6 +97,33 @@ class CheckInHand(Skill):
             f"{where}: needle slipped in {self.arm_name}'s jaw ({detail}); in-hand pose "
             f"re-estimated: held at {now:.0f}°, was {was:.0f}°"
         )
+
+    def _jaw_distance(self, arm, T_world_needle: np.ndarray) -> float:
+        """How far (m) the seen wire passes from the pinch point of the calibrated arm."""
+        base = arm.base_frame()
+        tip = invert(base) @ arm.tip_world()
+        return estimate_in_hand(T_world_needle, tip, base, self.context.needle).jaw_distance
+
+    def _drifted(self, arm, kept, seen: str) -> None:
+        """The needle is not where the arm's calibration puts its jaws: the offset drifted.
+        The calibration is marked lost (the tree recalibrates); the skill fails saying so
+        (the arm has risen from the entry first: its needle hangs lower than believed)."""
+        self.context.belief = kept
+        arm.calibrated = False
+        self.report.update(checked=True, drift=True, detail=seen)
+        raise SkillFailure(
+            f"pair {self.pair}: {arm.name}'s calibration no longer holds ({seen}): the needle "
+            f"cannot have left its jaws, so its joint offset drifted"
+        )
+
+    def _rise(self) -> Waiting:
+        """Straight up ``RISE`` along the phantom's up axis (as far as the arm reaches)."""
+        ctx = self.context
+        arm = ctx.arm(self.arm_name)
+        T = arm.commanded_tip_world()
+        T[:3, 3] += RISE * ctx.phantom.T_world_phantom[:3, 2]
+        if not feasible(arm, [T]):
+            yield from move_to(ctx.clock, arm, [T], "rise from the entry")
 
     def _make_way(self, target: np.ndarray) -> list[Waiting]:
         """Moves that take the other arms out of the cameras' sight of ``target``."""
@@ -86,12 +138,21 @@ class CheckInHand(Skill):
         return moves
 
     def _look(self) -> Waiting:
-        """The fresh belief from this view, else from a presentation; None when refused."""
+        """The fresh belief from this view, a risen one, else a presentation (None: refused),
+        and the refused answers' distances from the pinch point (a needle seen off it)."""
         ctx = self.context
-        for present in (False, True):
+        off_grasp = []
+        for i, present in enumerate((False, False, True)):
+            if i == 1:  # a second view, risen from the entry, before presenting it
+                yield from self._rise()
+            look = LocalizeNeedle(ctx, self.arm_name, present=present)
             try:
-                yield from self.run(LocalizeNeedle(ctx, self.arm_name, present=present))
-                return ctx.belief
+                yield from self.run(look)
+                return ctx.belief, off_grasp
             except SkillFailure as e:
                 self.report.setdefault("refusals", []).append(e.reason)
-        return None
+                refused = [c for c in look.report.get("checks", []) if not c["ok"]]
+                off_grasp += [c["detail"] for c in refused if "held by" in c["check"]]
+                if off_grasp:  # seen, but off the pinch point: no need to present it
+                    break
+        return None, off_grasp

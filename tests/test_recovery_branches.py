@@ -212,6 +212,40 @@ def test_a_needle_slipped_on_the_way_to_the_entry_is_re_estimated_and_re_grasped
     assert passed(session), session.scores()[0].failure
 
 
+@pytest.mark.slow
+def test_a_drifted_psm2_is_seen_off_its_pinch_point_and_recalibrated(session):
+    # Without this branch the same drift (0.5°, 0.5°, 0.5 mm on joints 1-3, the fault model's
+    # largest step) failed the throw: the first insertion was not confirmed, and after the
+    # back-out the extraction's look disagreed with PSM1's gripper (a stab scored at entry 1).
+    check = "Needle still as held? (pair 1)"
+    assert session.run_until(running(session, check, "bringing the needle")) is not None
+    truth = GroundTruth(session.world)
+    before = np.array(session.context.arm("psm2").offset_estimate)
+    session.world.faults.drift("psm2", dq=(0.5, 0.5, 0.5))
+    drifted = truth.joint_offset("psm2")[:3]
+    throw = finish(session)
+    assert ran(session, "Retry: check pair 1 after recalibrating") == [
+        (1, check, Status.FAILURE),
+        (1, "Recalibrate PSM2 (pair 1)", Status.SUCCESS),
+        (2, check, Status.SUCCESS),
+    ]
+    reports = session.context.reports
+    first, second = [r for r in reports if r["behaviour"] == check]
+    assert first["drift"] and "psm2's calibration no longer holds" in first["failure"]
+    assert not second.get("slipped") and not second.get("drift")
+    cal = [r for r in reports if r["behaviour"] == "Recalibrate PSM2 (pair 1, empty jaw)"]
+    assert [r["status"] for r in cal] == ["SUCCESS"]
+    after = np.array(session.context.arm("psm2").offset_estimate)
+    assert session.context.arm("psm2").calibrated
+    # The new Δq̂ follows the drift: nearer the drifted offset than the old one (deg, deg, mm).
+    in_deg_mm = np.array([np.rad2deg(1.0), np.rad2deg(1.0), 1e3])
+    assert np.linalg.norm((after - drifted) * in_deg_mm) < np.linalg.norm(
+        (before - drifted) * in_deg_mm
+    )
+    assert throw["status"] == "SUCCESS", throw["reason"]
+    assert passed(session), session.scores()[0].failure
+
+
 def test_a_needle_lying_turned_over_or_on_its_edge_is_refused_before_any_pick_up():
     from suture_bt.geometry import NeedleModel, PhantomModel
     from suture_bt.skills.base import SkillFailure

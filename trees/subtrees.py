@@ -41,6 +41,7 @@ from suture_bt.behaviours.actions import (
     grasp_for_pairs,
 )
 from suture_bt.behaviours.conditions import (
+    CalibrationLost,
     GraspMissed,
     NeedleDropped,
     NeedleLocalised,
@@ -191,6 +192,46 @@ def retried_extraction(pair: int) -> py_trees.behaviour.Behaviour:
     )
 
 
+def checked_in_hand(pair: int, later_pairs: tuple[int, ...]) -> py_trees.behaviour.Behaviour:
+    """The in-hand check before inserting; when it finds PSM2's calibration lost (drift), PSM2
+    hands the needle to PSM1, is calibrated again (empty jaw) and takes it back, and the
+    needle is checked again."""
+    grasp = grasp_for_pairs((pair, *later_pairs))
+    recalibrate = py_trees.composites.Sequence(
+        f"Recalibrate PSM2 (pair {pair})",
+        memory=True,
+        children=[
+            CalibrationLost(INSERTER),
+            retried_handover(
+                HandOver(
+                    INSERTER,
+                    PULLER,
+                    away_from_holder_and(grasp),
+                    pulling=True,
+                    name=f"PSM2 hands the needle to PSM1 to recalibrate (pair {pair})",
+                )
+            ),
+            Calibrate(INSERTER, name=f"Recalibrate PSM2 (pair {pair}, empty jaw)"),
+            retried_handover(
+                HandOver(
+                    PULLER,
+                    INSERTER,
+                    grasp,
+                    next_pair=pair,
+                    name=f"PSM1 hands it back recalibrated (pair {pair})",
+                )
+            ),
+        ],
+    )
+    return recovery_idiom(
+        f"Retry: check pair {pair} after recalibrating",
+        CheckNeedleInHand(INSERTER, pair),
+        recalibrate,
+        RETRIES,
+        blame_recovery=True,
+    )
+
+
 def regrasp(pair: int, later_pairs: tuple[int, ...]) -> py_trees.behaviour.Behaviour:
     """PSM2's grasp (after a slip) leaves the tip too little room: PSM1 takes the needle and
     hands it back at the grasp the pairs from ``pair`` on need."""
@@ -247,7 +288,7 @@ def throw(pair: int, later_pairs: tuple[int, ...]) -> py_trees.behaviour.Behavio
         memory=True,
         children=[
             NeedleLocalised(INSERTER, name="Needle in PSM2's hand?"),
-            CheckNeedleInHand(INSERTER, pair),
+            checked_in_hand(pair, later_pairs),
             SkipWhen(
                 f"Unless the grasp leaves the tip room (pair {pair})",
                 regrasp(pair, later_pairs),
