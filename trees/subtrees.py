@@ -4,7 +4,12 @@ SRC Task 3 starts with the needle in PSM2's jaw, and calibration needs an empty 
 preparation calibrates PSM1, localises the needle (presented by PSM2), hands it to PSM1,
 calibrates PSM2 and takes it back at the grasp the throws need (its in-hand transform then
 re-estimated from images with a calibrated arm). A throw: PSM2 inserts through the entry,
-PSM1 pulls it through the exit, and (unless it is the last) hands it back to PSM2.
+PSM1 pulls it through the exit, and (unless it is the last) hands it back to PSM2. Before
+each insertion the needle is looked at over the entry: a slip (the needle seen away from its
+predicted pose, its wire still between the blades) re-estimates the in-hand pose and, when
+the grasp then leaves the tip too little room, PSM2 re-grasps through PSM1; a drift (the wire
+seen off the calibrated pinch point) recalibrates PSM2 with an empty jaw (PSM1 holds the
+needle meanwhile).
 
 Recovery branches (Nav2-style :class:`RecoveryNode`, one retry each): a failed handover is
 retried after the taker re-opens and backs off and the giver's needle is re-localised; an
