@@ -2,10 +2,12 @@
 
 *Fired* comes from the world's record (``GroundTruth.fault_events()``, ground truth, after the
 run). *Detected* comes only from what the tree itself saw and reported: frames the needle
-sensor captured again (lost or dark), frames the calibration lost, a throw ended with "needle
-dropped", and recovery nodes that ran a recovery. Slip and drift have no detector yet, so
-they count as undetected unless a recovery ran in the throw they hit. A throw counts under a
-kind when a fault of that kind fired inside its window; its outcome is the world's score.
+sensor captured again (lost or dark), frames the calibration lost, a needle seen dropped (the
+search for a dropped needle), the in-hand check's "slipped" and "drift" verdicts, and an
+insertion whose tip reading corrected the in-hand turn along the arc by more than 5°. A throw
+counts under a kind when a fault of that kind fired inside its window; its outcome is the
+world's score. :class:`RecoveryTime` adds up the simulated time each recovery node spent after
+its first failure (its recovery branch and the attempts after it).
 """
 
 from __future__ import annotations
@@ -36,9 +38,29 @@ def tree_detections(session) -> dict[str, int]:
         found["frame_lost" if kind == "lost" else "dark"] += 1
     for r in _all_reports(session.context.reports):
         found["frame_lost"] += len(r.get("frames_lost", []))
-        if "dropped" in (r.get("failure") or ""):
-            found["drop"] += 1
-    return dict(found)
+        found["drop"] += int(r.get("skill") == "find dropped needle")
+        found["slip"] += int(bool(r.get("slipped")))
+        found["drift"] += int(bool(r.get("drift")))
+        if abs((r.get("evidence") or {}).get("turn_deg", 0.0)) > 5.0:
+            found["slip"] += 1
+    return {k: v for k, v in found.items() if v}
+
+
+class RecoveryTime:
+    """A tick observer: simulated seconds each recovery node spent after its first failure."""
+
+    def __init__(self):
+        self.seconds: dict[str, float] = defaultdict(float)
+        self._t = 0.0
+
+    def __call__(self, session) -> None:
+        now = float(session.context.clock.now())
+        dt, self._t = now - self._t, now
+        for node in session.root.iterate():
+            if not isinstance(node, RecoveryNode) or node.status != py_trees.common.Status.RUNNING:
+                continue
+            if node.attempts > 1 or node.current_child is node.recovery:
+                self.seconds[node.name] += dt
 
 
 def recoveries(root: py_trees.behaviour.Behaviour) -> list[dict]:
@@ -85,5 +107,18 @@ def summarise_faults(runs: list[dict]) -> dict:
         "throws_hit": len(hit_all),
         "throws_hit_passed": sum(t["passed"] for t in hit_all),
         "recoveries_run": sum(len(r["recoveries"]) for r in runs),
+        "recovery_sim_s": round(sum(sum(r.get("recovery_sim_s", {}).values()) for r in runs), 1),
     }
     return table
+
+
+def recovery_costs(runs: list[dict]) -> dict[str, dict]:
+    """Per recovery node (numbers as #): how often it ran and its simulated time, mean and max."""
+    spent: dict[str, list[float]] = defaultdict(list)
+    for r in runs:
+        for name, sec in r.get("recovery_sim_s", {}).items():
+            spent["".join("#" if c.isdigit() else c for c in name)].append(sec)
+    return {
+        k: {"ran": len(v), "sim_s_mean": round(sum(v) / len(v), 2), "sim_s_max": max(v)}
+        for k, v in sorted(spent.items())
+    }

@@ -41,9 +41,11 @@ def scene_for(condition: str, seed: int, faults: str = "none"):
 def run_one(condition: str, seed: int, oracle: bool, faults: str = "none") -> dict:
     session = Session(RunOptions(oracle=oracle), scene_for(condition, seed, faults))
     t0 = time.perf_counter()
+    spent = fault_stats.RecoveryTime()
     try:
-        session.run()
+        session.run(spent)
         result = session.result()
+        result["recovery_sim_s"] = {k: round(v, 2) for k, v in spent.seconds.items()}
         events = fault_stats.fired_events(session.world)
         result["faults_fired"] = events
         result["faults_detected"] = fault_stats.tree_detections(session)
@@ -149,6 +151,12 @@ def main() -> None:
         )
         for kind, row in s["faults"].items():
             print(f"  {kind:<11} " + "  ".join(f"{k} {v}" for k, v in row.items()))
+        s["recovery_costs"] = fault_stats.recovery_costs(runs)
+        print("recoveries: node, times run, simulated time spent (mean, max)")
+        for node, row in s["recovery_costs"].items():
+            print(
+                f"  {node:<48} {row['ran']:>3}  {row['sim_s_mean']:.1f} s  {row['sim_s_max']:.1f} s"
+            )
     if args.json:
         args.json.write_text(
             json.dumps(
