@@ -63,8 +63,11 @@ def test_lost_frames_are_captured_again_in_calibration_and_localisation(session)
 @pytest.mark.slow
 def test_unconfirmed_insertion_is_looked_at_again_and_confirmed(session):
     assert session.run_until(running(session, "Insert pair 1", "driving the needle")) is not None
-    # Both confirmation looks lose all their frames: the emerged tip is not confirmed.
-    session.world.faults.lose_frames(6)
+    # Every confirmation look loses all its frames: the emerged tip is not confirmed.
+    from suture_bt.skills.insert import CONFIRM_LOOKS
+    from suture_bt.skills.needle_sensor import MAX_BAD_FRAMES
+
+    session.world.faults.lose_frames(CONFIRM_LOOKS * MAX_BAD_FRAMES)
     throw = finish(session)
     retry = node(session, "Retry: insert pair 1")
     ran = [(a, name, status) for a, name, status, _ in retry.history]
@@ -86,6 +89,10 @@ def test_unconfirmed_insertion_is_looked_at_again_and_confirmed(session):
     assert passed(session), session.scores()[0].failure
 
 
+#: The in-hand check before the first insertion: PSM2 moves the needle over entry 1 for it.
+CHECK_1 = "Needle still as held? (pair 1)"
+
+
 def ran(session, name: str) -> list[tuple[int, str, Status]]:
     """(attempt, child, status) of every child RecoveryNode ``name`` finished."""
     return [(a, child, status) for a, child, status, _ in node(session, name).history]
@@ -93,7 +100,8 @@ def ran(session, name: str) -> list[tuple[int, str, Status]]:
 
 @pytest.mark.slow
 def test_needle_dropped_before_the_insertion_is_picked_up_and_the_throw_resumed(session):
-    assert session.run_until(running(session, "Insert pair 1", "approaching")) is not None
+    # PSM2 brings the needle over entry 1 (the in-hand check before the insertion).
+    assert session.run_until(running(session, CHECK_1, "bringing the needle")) is not None
     session.world.faults.drop("psm2")
     throw = finish(session)
     assert ran(session, "Retry: pair 1 after a drop") == [
@@ -121,7 +129,8 @@ OUT_OF_REACH = (0.0, -0.12, 0.0421)
 
 @pytest.mark.slow
 def test_needle_dropped_out_of_both_arms_reach_fails_the_throw_saying_so(session, tmp_path):
-    assert session.run_until(running(session, "Insert pair 1", "approaching")) is not None
+    # PSM2 brings the needle over entry 1 (the in-hand check before the insertion).
+    assert session.run_until(running(session, CHECK_1, "bringing the needle")) is not None
     session.world.faults.drop("psm2")
     session.world.needle.set_pose(_pose(_rot_z(0.3), OUT_OF_REACH))  # test API: off the phantom
     t_drop = session.context.clock.now()
