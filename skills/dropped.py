@@ -21,11 +21,11 @@ from suture_bt.geometry.phantom import TISSUE_TOP_Z
 from suture_bt.skills import checks
 from suture_bt.skills.base import Skill, SkillFailure, Waiting
 from suture_bt.skills.context import NeedleBelief, TaskContext
-from suture_bt.skills.grasps import backed_off, hand, tip_goal
+from suture_bt.skills.grasps import hand
 from suture_bt.skills.line_of_sight import clear_tip_pose
 from suture_bt.skills.localize_needle import LocalizeNeedle
 from suture_bt.skills.motion import feasible, jaw_to, move_to, together, wait
-from suture_bt.skills.pick_up import APPROACH, LIFT, MAX_TILT
+from suture_bt.skills.pick_up import MAX_TILT, grasp_path, resting_tilt
 from suture_bt.skills.recover import JAW_OPEN
 from suture_bt.transforms import invert
 
@@ -71,24 +71,19 @@ def pick_up_path(context: TaskContext, T_world_needle: np.ndarray, arc_angle: fl
     """The pick-up's tip poses (hover, grasp, lift) for this resting needle with the driving
     hand, as :class:`~suture_bt.skills.pick_up.PickUp` plans them; SkillFailure (its reason)
     for a needle on its edge or lying turned over."""
-    up = context.phantom.T_world_phantom[:3, 2]
-    z_up = float(T_world_needle[:3, 2] @ up)
-    tilt = float(np.arccos(min(1.0, abs(z_up))))
+    tilt, z_up = resting_tilt(context, T_world_needle)
     if tilt > MAX_TILT:
         raise SkillFailure(
             f"standing on its edge (plane {np.rad2deg(tilt):.0f}° from the tissue, > "
             f"{np.rad2deg(MAX_TILT):.0f}°): no grasp from above"
         )
-    if z_up < 0.0:
+    if not z_up:
         raise SkillFailure(
             "lying turned over: from above only the turned hand takes it, the insertion "
             "cannot be driven with that hand and no handover changes the side the jaws hold "
             "it from (both arms take it from the same side)"
         )
-    goal = tip_goal(T_world_needle, hand(context.needle, arc_angle))
-    T_lift = goal.copy()
-    T_lift[:3, 3] += LIFT * up
-    return [backed_off(goal, APPROACH), goal, T_lift]
+    return grasp_path(context, T_world_needle, hand(context.needle, arc_angle))
 
 
 class FindDropped(Skill):

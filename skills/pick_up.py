@@ -14,7 +14,9 @@ or down (turned over). The driving hand puts tip z = −needle z, so on a needle
 would come from below the tissue: the skill then takes it with the only hand the geometry
 allows, the same grasp turned half a turn about the wire (tip z = +needle z, jaws from above),
 and says so in its feedback and report (``hand``: "driving" or "turned over"). That grasp is
-not the one the insertion planner drives with: a hand-over to the other arm and back gives it.
+not the one the insertion planner drives with, and no hand-over gives it back (both arms take
+a needle from the same side of its plane; checked at 40-120° arc angles): the throws then fail
+saying so.
 A needle on its edge (no jaw direction within ``MAX_TILT`` of straight down) is refused.
 """
 
@@ -55,6 +57,22 @@ def turned_over_hand(needle: NeedleModel, arc_angle: float) -> np.ndarray:
     radial = np.array([np.cos(a), np.sin(a), 0.0])
     R = np.stack([-tangent, -radial, [0.0, 0.0, 1.0]])  # rows: tip axes in the needle frame
     return make_transform(R, np.array([0.0, 0.0, -GRASP_DEPTH]) - R @ needle.point_at(a))
+
+
+def resting_tilt(ctx: TaskContext, T_world_needle: np.ndarray) -> tuple[float, bool]:
+    """A resting needle's plane tilt from the tissue (rad) and whether its z points up."""
+    z_up = float(T_world_needle[:3, 2] @ ctx.phantom.T_world_phantom[:3, 2])
+    return float(np.arccos(min(1.0, abs(z_up)))), z_up >= 0.0
+
+
+def grasp_path(
+    ctx: TaskContext, T_world_needle: np.ndarray, T_tip_needle: np.ndarray
+) -> list[np.ndarray]:
+    """Tip poses of a pick-up from above: the hover back along the jaws, the grasp, the lift."""
+    goal = tip_goal(T_world_needle, T_tip_needle)
+    T_lift = goal.copy()
+    T_lift[:3, 3] += LIFT * ctx.phantom.T_world_phantom[:3, 2]
+    return [backed_off(goal, APPROACH), goal, T_lift]
 
 
 class PickUp(Skill):
@@ -133,26 +151,22 @@ class PickUp(Skill):
     def _choose_hand(self, T_needle: np.ndarray) -> tuple[np.ndarray, str]:
         """The hand whose jaws come from above: driving when the needle's z points up."""
         ctx = self.context
-        up = ctx.phantom.T_world_phantom[:3, 2]
-        z_up = float(T_needle[:3, 2] @ up)
-        tilt = float(np.arccos(min(1.0, abs(z_up))))
+        tilt, z_up = resting_tilt(ctx, T_needle)
         self.report["needle_tilt_deg"] = float(np.rad2deg(tilt))
         if tilt > MAX_TILT:
             raise SkillFailure(
                 f"pick up: the needle stands on its edge (plane {np.rad2deg(tilt):.0f}° from "
                 f"the tissue, > {np.rad2deg(MAX_TILT):.0f}°): no grasp from above"
             )
-        if z_up >= 0.0:
+        if z_up:
             return hand(ctx.needle, self.arc_angle), "driving"
         return turned_over_hand(ctx.needle, self.arc_angle), "turned over"
 
     def _choose_arm(self, T_needle: np.ndarray, T_hand: np.ndarray) -> tuple[ArmHandle, np.ndarray]:
         """The named arm, or the first that reaches (calibrated arms first, nearest first)."""
         ctx = self.context
-        goal = tip_goal(T_needle, T_hand)
-        T_lift = goal.copy()
-        T_lift[:3, 3] += LIFT * ctx.phantom.T_world_phantom[:3, 2]
-        path = [backed_off(goal, APPROACH), goal, T_lift]
+        path = grasp_path(ctx, T_needle, T_hand)
+        goal = path[1]
         if self.arm_name is not None:
             if self.arm_name not in ctx.arms:
                 raise SkillFailure(f"pick up: no arm named {self.arm_name!r}")
