@@ -26,7 +26,7 @@ from suture_bt.skills.base import Skill, SkillFailure, Waiting
 from suture_bt.skills.context import TaskContext
 from suture_bt.skills.grasps import held_arc_angle
 from suture_bt.skills.insert import LIFT, PRE_ARC
-from suture_bt.skills.line_of_sight import clear_tip_pose
+from suture_bt.skills.line_of_sight import make_way
 from suture_bt.skills.localize_needle import LocalizeNeedle
 from suture_bt.skills.motion import feasible, move_to, together
 from suture_bt.transforms import invert
@@ -62,7 +62,7 @@ class CheckInHand(Skill):
         self.say(f"{where}: bringing the needle over {entry.name} to look at it")
         try:
             approach = move_to(ctx.clock, arm, [lift], "approach the entry")
-            yield from together(approach, *self._make_way((lift @ T_gn)[:3, 3]))
+            yield from together(approach, *make_way(ctx, (lift @ T_gn)[:3, 3], self.arm_name))
         except SkillFailure as e:
             raise SkillFailure(
                 f"{where}: entry out of {self.arm_name}'s reach: {e.reason}"
@@ -124,18 +124,6 @@ class CheckInHand(Skill):
         T[:3, 3] += RISE * ctx.phantom.T_world_phantom[:3, 2]
         if not feasible(arm, [T]):
             yield from move_to(ctx.clock, arm, [T], "rise from the entry")
-
-    def _make_way(self, target: np.ndarray) -> list[Waiting]:
-        """Moves that take the other arms out of the cameras' sight of ``target``."""
-        ctx = self.context
-        moves = []
-        for name, other in ctx.arms.items():
-            if name == self.arm_name:
-                continue
-            T = clear_tip_pose(ctx, other.commanded_tip_world(), other.base_frame()[:3, 3], target)
-            if T is not None and not feasible(other, [T]):
-                moves.append(move_to(ctx.clock, other, [T], "make way for the cameras"))
-        return moves
 
     def _look(self) -> Waiting:
         """The fresh belief from this view, a risen one, else a presentation (None: refused),

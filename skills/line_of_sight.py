@@ -12,7 +12,9 @@ from __future__ import annotations
 
 import numpy as np
 
+from suture_bt.skills.base import Waiting
 from suture_bt.skills.context import TaskContext
+from suture_bt.skills.motion import feasible, move_to
 
 #: Free radius kept around the sight line (m): the needle radius plus the jaws and a margin.
 CLEARANCE = 0.022
@@ -64,3 +66,15 @@ def clear_tip_pose(
             return T
         T[:3, 3] += 0.006 * away
     return T
+
+
+def make_way(ctx: TaskContext, target: np.ndarray, keep: str | None = None) -> list[Waiting]:
+    """Moves that take every arm but ``keep`` out of the cameras' sight of ``target``."""
+    moves = []
+    for name, other in ctx.arms.items():
+        if name == keep:
+            continue
+        T = clear_tip_pose(ctx, other.commanded_tip_world(), other.base_frame()[:3, 3], target)
+        if T is not None and not feasible(other, [T]):
+            moves.append(move_to(ctx.clock, other, [T], "make way for the cameras"))
+    return moves

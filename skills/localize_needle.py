@@ -16,8 +16,8 @@ from suture_bt.perception.in_hand import estimate_in_hand
 from suture_bt.skills import presentation
 from suture_bt.skills.base import Skill, SkillFailure, Waiting
 from suture_bt.skills.context import NeedleNotSeen, NeedleObservation, TaskContext
-from suture_bt.skills.line_of_sight import clear_tip_pose
-from suture_bt.skills.motion import feasible, move_to, together
+from suture_bt.skills.line_of_sight import make_way
+from suture_bt.skills.motion import move_to, together
 from suture_bt.skills.tip_uncertainty import worst_offset_displacement
 
 #: A held needle's wire must pass this close to the holder's pinch point (m) once the arm is
@@ -59,7 +59,7 @@ class LocalizeNeedle(Skill):
             present = move_to(
                 ctx.clock, arm, presentation.lifted_first(ctx, arm, T), "present the needle"
             )
-            yield from together(present, *self._make_way(self._target(T)))
+            yield from together(present, *make_way(ctx, self._target(T), self.holder))
             obs = self._look(reasons)
             if obs is not None:
                 self._adopt(obs)
@@ -72,18 +72,6 @@ class LocalizeNeedle(Skill):
         if b is not None and b.holder == self.holder and b.T_tip_needle is not None:
             return (T_present @ b.T_tip_needle)[:3, 3]
         return T_present[:3, 3]
-
-    def _make_way(self, target: np.ndarray) -> list[Waiting]:
-        """Moves that take the other arms out of the cameras' sight of ``target``."""
-        ctx = self.context
-        moves = []
-        for name, other in ctx.arms.items():
-            if name == self.holder:
-                continue
-            T = clear_tip_pose(ctx, other.commanded_tip_world(), other.base_frame()[:3, 3], target)
-            if T is not None and not feasible(other, [T]):
-                moves.append(move_to(ctx.clock, other, [T], "make way for the cameras"))
-        return moves
 
     def _look(self, reasons: list[str]) -> NeedleObservation | None:
         ctx = self.context
