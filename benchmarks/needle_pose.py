@@ -21,6 +21,10 @@ again with the task priors a caller knows there (reported as ``SET+prior``). ``w
 answers ≥ 2 mm or ≥ 5° off over all scenes; ``wall_ms_p95`` = p95 wall time of a localiser
 call per stereo frame, refusals included.
 
+The localiser is given the task's known phantom as its tissue model (``unseen_arc.tissue_model``:
+the block's top and footprint, the ridge under the port pairs), so the tissue hides the needle
+only where it can (``--max-exposed-mm inf`` turns the unseen-part check off).
+
     python benchmarks/needle_pose.py [--json PATH] [--n 200] [--resolution 1920x1080]
         [--prior none|held|port|task|both] [--set SET ...]
 """
@@ -46,6 +50,7 @@ from suture_bt.perception.needle_localizer import MAX_ANGLE_STD_DEG, NeedleLocal
 from suture_bt.perception.needle_prior import HeldPrior, PortPrior, arc_distance
 from suture_bt.perception.needle_projection import rasterize_needle
 from suture_bt.perception.pose_fit import NeedleNotFound
+from suture_bt.perception.unseen_arc import tissue_model
 from suture_bt.transforms import invert
 
 HELD_OUT_SEED = 1000
@@ -106,6 +111,9 @@ def _draw_scene(sim: SimScene, cond: str, rng, i: int):
     raise RuntimeError(f"no {cond} scene in {MAX_SCENE_ATTEMPTS} draws (scene {i})")
 
 
+#: The phantom's tissue block footprint ((x0, x1), (y0, y1), phantom frame; the scene's known
+#: geometry, sim/phantom_body.py), for the localiser's tissue model.
+BLOCK = ((-0.045, 0.045), (-0.055, 0.075))
 #: Tolerances (m) of the benchmark's priors: held (exact joints) and in a port.
 HELD_PRIOR_TOL = 0.001
 PORT_PRIOR_TOL = 0.003
@@ -127,7 +135,7 @@ def _priors(sim: SimScene, s, kind: str) -> list:
         port = min(
             sim.sampler.ports, key=lambda p: arc_distance(p.position, s.T_world_needle, sim.model)
         )
-        return [PortPrior(port.name, port.position, PORT_PRIOR_TOL)]
+        return [PortPrior(port.name, port.position, PORT_PRIOR_TOL, port.normal)]
     return []
 
 
@@ -155,6 +163,7 @@ def _reason_kind(reason: str) -> str:
         "which end is the base cannot be told",
         "the seen part leaves the pose loose",
         "the swage band starts",
+        "hidden by nothing",
         "no fitted pose",
         "ends disagree with",
     ):
@@ -284,7 +293,24 @@ def _localize_row(loc, left, right, T_true, priors, R_swap) -> dict:
         "angle_std_deg": est.angle_std_deg,
         "position_std_mm": est.position_std_mm,
         "ms": est.timings_ms,
+        "exposed_mm": [1e3 * x for x in est.exposure.longest_exposed],
+        "keypoint_end_px": _keypoint_end_px(loc, est),
+        "end_exposed_mm": [1e3 * x for x in est.exposure.end_exposed],
+        "seen_inside_mm": 1e3 * est.exposure.seen_inside,
     }
+
+
+def _keypoint_end_px(loc, est) -> list[float]:
+    """Left image: distance (px) from each confident keypoint to the nearer fitted end."""
+    from suture_bt.perception.needle_localizer import STRONG_KEYPOINT_SCORE
+    from suture_bt.perception.needle_projection import end_pixels
+
+    ends = np.asarray(end_pixels(loc.stereo.left, est.T_cam_needle, loc.model))
+    out = []
+    for k in range(2):
+        if est.keypoint_scores[0, k] >= STRONG_KEYPOINT_SCORE:
+            out.append(float(np.min(np.linalg.norm(ends - est.keypoints_left[k], axis=1))))
+    return out
 
 
 def _ms(t0: float) -> float:
@@ -301,13 +327,23 @@ def run(
     conditions=("unoccluded", "occluded"),
     max_angle_std_deg: float = MAX_ANGLE_STD_DEG,
     prior: str = "none",
+    max_exposed: float | None = None,
 ) -> dict:
     """Results per set; the task sets under ``prior`` "both" (default for them when
     ``prior`` is "none") give ``SET`` (no priors) and ``SET+prior`` (task priors) on the same
     scenes; "task" only the latter."""
     torch.set_num_threads(threads)
     sim = SimScene(width, height)
-    loc = NeedleLocalizer(sim.stereo, weights=weights, max_angle_std_deg=max_angle_std_deg)
+    ph = sim.world.task.phantom
+    pairs = [tuple((p.position, p.normal) for p in ph.pair(k)) for k in range(1, ph.num_pairs + 1)]
+    kw = {} if max_exposed is None else {"max_exposed": max_exposed}
+    loc = NeedleLocalizer(
+        sim.stereo,
+        weights=weights,
+        max_angle_std_deg=max_angle_std_deg,
+        tissue=tissue_model(ph.T_world_phantom, pairs, sim.stereo.left.T_world_cam[:3, 3], BLOCK),
+        **kw,
+    )
     # The needle's 180° symmetry about its bisector (base ↔ tip) as a rotation in its frame.
     mid = (sim.model.base_angle + sim.model.tip_angle) / 2
     R_swap = Rotation.from_rotvec(np.pi * np.array([np.cos(mid), np.sin(mid), 0.0])).as_matrix()
@@ -381,6 +417,12 @@ def main(argv=None) -> int:
         help="random sets: held / port priors in held / in-port scenes (task, both: none); "
         "task sets: both (default: without and with the task priors), task or none",
     )
+    ap.add_argument(
+        "--max-exposed-mm",
+        type=float,
+        help="refuse fits whose arc runs longer over unhidden background (default: the "
+        "localiser's; inf: no check)",
+    )
     args = ap.parse_args(argv)
     w, h = (int(v) for v in args.resolution.lower().split("x"))
     t0 = time.time()
@@ -395,6 +437,7 @@ def main(argv=None) -> int:
         conds,
         args.max_angle_std_deg,
         args.prior,
+        None if args.max_exposed_mm is None else 1e-3 * args.max_exposed_mm,
     )
     meta = {
         "resolution": [w, h],
@@ -402,6 +445,7 @@ def main(argv=None) -> int:
         "seed": args.seed,
         "max_angle_std_deg": args.max_angle_std_deg,
         "prior": args.prior,
+        "max_exposed_mm": args.max_exposed_mm,
         "seconds": time.time() - t0,
     }
     summary = {k: {kk: vv for kk, vv in v.items() if kk != "per_scene"} for k, v in res.items()}

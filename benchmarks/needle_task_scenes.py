@@ -189,7 +189,7 @@ def in_port(sim, rng):
         priors = [HeldPrior(arm, _pinch(_tip(sim, arm, q_arm)), HELD_TOL)]
         for port in (entry, exit_):
             if arc_distance(port.position, T, m) <= PORT_TOL:
-                priors.append(PortPrior(port.name, port.position, PORT_TOL))
+                priors.append(PortPrior(port.name, port.position, PORT_TOL, port.normal))
         return _sample("in_port", T, q, jaw, rng), priors
     raise RuntimeError("no reachable in-port grasp in 100 draws")
 

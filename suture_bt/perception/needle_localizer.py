@@ -5,8 +5,11 @@
 2. Each eye's coarse mask gates a full-resolution colour test (:mod:`colour_refine`).
 3. The stereo pose fit (:mod:`pose_fit`) starts from the left keypoints, with a depth hint
    from their stereo disparity, and optionally a warm start from the previous estimate.
-4. The outline cannot tell base from tip: the colour at the fitted ends (the violet swage band
-   at the base, :mod:`needle_ends`) does, else the network's base keypoint.
+4. The fitted arc's unseen part must be hidden by something (:mod:`unseen_arc`: a jaw or
+   shaft, the border, the tissue where the caller's tissue model says it can hide it), and
+   no wire both eyes see may lie deep inside the known tissue; else a refusal.
+5. The outline cannot tell base from tip: the colour at the fitted ends (the violet swage band
+   at the base, :mod:`needle_ends`) does, else continuity with the previous estimate.
 Only images and the calibrated camera model are used (no ground truth).
 """
 
@@ -14,7 +17,7 @@ from __future__ import annotations
 
 import os
 import time
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field, replace
 
 import cv2
@@ -69,6 +72,11 @@ from suture_bt.perception.pose_fit import (
     PoseFitter,
     mask_ends,
 )
+from suture_bt.perception.unseen_arc import (
+    ArcExposure,
+    arc_exposure,
+    below_port_planes,
+)
 from suture_bt.transforms import rotation_angle
 
 #: A keypoint heatmap peak below this probability is not trusted (the mask's ends are used).
@@ -113,6 +121,19 @@ MAX_BAND_OFFSET = 1.5 * BAND_LENGTH
 #: :func:`~suture_bt.perception.pose_fit.pose_uncertainty`) exceeds this is refused: the seen
 #: piece of the needle leaves its plane, or its course behind an occluder, free.
 MAX_ANGLE_STD_DEG = 2.0
+#: A final fit whose model arc runs longer than this (m of arc) in both eyes over pixels
+#: where neither the needle nor anything that could hide it is seen (a jaw or shaft, the
+#: border, the tissue where the known phantom can hide it: :mod:`unseen_arc`) is refused:
+#: wire the image says is not there. Development seed 6173 (25 scenes per set, every set):
+#: correct answers exposed at most 2.8 mm (both eyes) / 4.2 mm (one eye); the mirror twins
+#: of the held needle at the Task 3 start 6.3-8.7 mm, of a needle in a port 9.4 mm.
+MAX_EXPOSED = 0.0035
+#: The same in either eye alone (a twin seen past the border or a jaw by the other eye).
+MAX_EXPOSED_ONE_EYE = 0.006
+#: A fit that puts more than this (m of arc) of wire seen by both eyes deep inside the known
+#: tissue (where it would be hidden) is refused (seed 6173: correct answers 0, a 180° twin of
+#: a needle in a port 5.9 mm).
+MAX_SEEN_INSIDE = 0.001
 
 
 @dataclass(frozen=True)
@@ -135,6 +156,8 @@ class NeedleEstimate:
     masks: tuple[MaskView, MaskView] = field(repr=False)
     #: The task priors the answer was checked against (:mod:`needle_prior`; empty: none).
     priors: tuple = ()
+    #: Where the model arc lies unseen and unhidden, per eye (:mod:`unseen_arc`).
+    exposure: ArcExposure | None = field(default=None, repr=False)
 
     @property
     def angle_std_deg(self) -> float:
@@ -193,12 +216,20 @@ class NeedleLocalizer:
         use_free_space: bool = False,
         max_rms_px: float = MAX_RMS_PX,
         max_angle_std_deg: float = MAX_ANGLE_STD_DEG,
+        tissue: Callable[[np.ndarray], np.ndarray] | None = None,
+        max_exposed: float = MAX_EXPOSED,
     ) -> None:
         """``use_free_space`` adds the pose fit's free-space term (experimental, off by
         default: on the 1080p occluded benchmark it lowered success from 0.43 to 0.37, since
         tissue hides a needle in a port as an arm does); ``max_rms_px`` is the worst final
         edge residual accepted and ``max_angle_std_deg`` the loosest predicted angle spread
-        (else NeedleNotFound)."""
+        (else NeedleNotFound).
+
+        ``tissue`` (optional task knowledge, world points → bool: where the known phantom may
+        hide a needle, :func:`~suture_bt.perception.unseen_arc.tissue_model`) lets the tissue
+        hide only there; without it any tissue-coloured pixel may hide the needle (its depth
+        is unknown), and only the background exposes a hypothesis.
+        ``max_exposed`` (m of arc): see :data:`MAX_EXPOSED` (inf: no check)."""
         self.stereo = stereo
         self.model = model or NeedleModel()
         self.net = for_inference(net if net is not None else load_network(weights))
@@ -208,6 +239,8 @@ class NeedleLocalizer:
         self.use_free_space = use_free_space
         self.max_rms_px = max_rms_px
         self.max_angle_std_deg = max_angle_std_deg
+        self.tissue = tissue
+        self.max_exposed = max_exposed
         self.fitter = PoseFitter(stereo, self.model, depth_range=(MIN_DEPTH, MAX_DEPTH))
         self.input_width = INPUT_SIZE[0]
         self.coarse_threshold = 0.3
@@ -310,6 +343,7 @@ class NeedleLocalizer:
         if previous is None and predicted:
             previous = self.stereo.left.T_cam_world @ np.asarray(predicted[0].T_world_needle)
         fit = self._fit((left, right), views, ends, depth, half_width, previous, kp, score, priors)
+        exposure = self._exposure((left, right), views, fit.T_cam_needle, priors)
         t3 = time.perf_counter()
         T_cam, evidence, decided_by = self._orient(
             fit.T_cam_needle, (left, right), views, half_width, previous
@@ -336,7 +370,51 @@ class NeedleLocalizer:
             fit=fit,
             masks=(views[0], views[1]),
             priors=priors,
+            exposure=exposure,
         )
+
+    def _exposure(self, images, views, T_cam: np.ndarray, priors) -> ArcExposure:
+        """The fitted arc's unseen, unhidden stretches; NeedleNotFound when both eyes show a
+        stretch longer than ``max_exposed`` (m) with no needle and nothing in front of it."""
+        ports = [(p.point, p.normal) for p in priors if getattr(p, "normal", None) is not None]
+        inside, tissue_hides = self.tissue, self.tissue is None and not ports
+        if ports:
+            planes = below_port_planes(ports)
+            known = self.tissue
+            inside = (
+                planes
+                if known is None
+                else (lambda w, margin=0.0: planes(w, margin) | known(w, margin))
+            )
+        hw = max(self.model.wire_radius * self.stereo.left.fx / float(T_cam[2, 3]), 1.0)
+        exp = arc_exposure(
+            images,
+            (views[0], views[1]),
+            self.stereo,
+            T_cam,
+            self.model,
+            hw,
+            self.rule,
+            inside_tissue=inside,
+            tissue_hides=tissue_hides,
+        )
+        if exp.seen_inside > MAX_SEEN_INSIDE and np.isfinite(self.max_exposed):
+            raise NeedleNotFound(
+                f"the fit puts {1e3 * exp.seen_inside:.1f} mm of the wire both eyes see inside "
+                "the tissue, where it would be hidden: its unseen part is hidden by nothing "
+                "it could be behind (a mirror twin)"
+            )
+        one_eye = self.max_exposed * MAX_EXPOSED_ONE_EYE / MAX_EXPOSED
+        if exp.both > self.max_exposed or exp.worst > one_eye:
+            raise NeedleNotFound(
+                f"the fitted arc runs {1e3 * exp.both:.1f} mm (left "
+                f"{1e3 * exp.longest_exposed[0]:.1f}, right {1e3 * exp.longest_exposed[1]:.1f}) "
+                "where neither the needle nor anything that could hide it is seen "
+                f"(> {1e3 * self.max_exposed:.1f} mm in both, {1e3 * one_eye:.1f} in one): its "
+                "unseen part is hidden by nothing "
+                "(a mirror twin or a pose slid along its circle)"
+            )
+        return exp
 
     def _masks(self, images, prob, scale, depth, anchors=(None, None)):
         """Both eyes' refined needle masks, the depth hint for the fit and the gate (px).

@@ -72,11 +72,16 @@ class HeldPrior:
 
 @dataclass(frozen=True)
 class PortPrior:
-    """In port ``port``: the arc passes within ``tolerance`` (m) of ``point`` (world)."""
+    """In port ``port``: the arc passes within ``tolerance`` (m) of ``point`` (world).
+
+    ``normal`` (optional, world: the port's outward surface normal) says which side of the
+    port is tissue: the needle's part below every given port's surface plane may be hidden
+    by the tissue (:mod:`unseen_arc`); without it the tissue hides nothing."""
 
     port: str
     point: np.ndarray
     tolerance: float = 0.003
+    normal: np.ndarray | None = None
 
     def miss(self, T_world_needle: np.ndarray, model: NeedleModel) -> float:
         """Distance from the port to the arc over the tolerance (≤ 1: consistent)."""

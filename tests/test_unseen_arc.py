@@ -1,0 +1,191 @@
+"""The unseen part of a fitted needle must be hidden by something (issue 14 item 4)."""
+
+import numpy as np
+from perception_helpers import stereo
+
+from suture_bt.geometry import NeedleModel
+from suture_bt.perception.mask_view import MaskView
+from suture_bt.perception.needle_projection import rasterize_needle
+from suture_bt.perception.unseen_arc import (
+    EXPOSED,
+    HIDDEN,
+    SEEN,
+    arc_exposure,
+    below_port_planes,
+)
+from suture_bt.transforms import invert, make_transform
+
+MODEL = NeedleModel()
+PINK = (200, 110, 110)
+GREY = (150, 150, 155)
+HW = 2.0  # the wire's half width at 80 mm, 640×480 (px, rounded up)
+
+
+def _rz(a: float) -> np.ndarray:
+    c, s = np.cos(a), np.sin(a)
+    return np.array([[c, -s, 0], [s, c, 0], [0, 0, 1.0]])
+
+
+def _scene(occluder: bool = False, background=(0, 0, 0)):
+    """A needle 80 mm in front of the left eye, face-on, grey on ``background``; with
+    ``occluder`` a grey slab (a jaw) covers the image right of the needle's middle column
+    and that part of the wire is left out of the mask."""
+    st = stereo(640, 480)
+    T = make_transform(np.eye(3), (0.0, 0.0, 0.08))
+    imgs, views = [], []
+    for cam in (st.left, st.right):
+        T_eye = invert(cam.T_world_cam) @ st.left.T_world_cam @ T
+        img = np.zeros((cam.height, cam.width, 3), np.uint8)
+        img[:] = background
+        m = rasterize_needle(cam, T_eye, MODEL)
+        img[m] = GREY
+        if occluder:
+            col = int(np.median(np.nonzero(m)[1]))
+            img[:, col:] = GREY
+            m[:, col:] = False
+        imgs.append(img)
+        views.append(MaskView(m))
+    return st, T, tuple(imgs), tuple(views)
+
+
+def test_the_true_pose_is_seen_everywhere():
+    st, T, imgs, views = _scene()
+    e = arc_exposure(imgs, views, st, T, MODEL, HW)
+    assert all((c == SEEN).all() for c in e.classes) and e.worst == 0.0
+
+
+def test_a_pose_turned_within_its_plane_runs_over_background():
+    """A slide along the circle: the circle right, its ends 7 mm along it off the needle."""
+    st, T, imgs, views = _scene()
+    turned = T.copy()
+    turned[:3, :3] = _rz(0.7)
+    e = arc_exposure(imgs, views, st, turned, MODEL, HW)
+    assert e.both > 0.004 and min(e.end_exposed) > 0.004
+
+
+def test_a_jaw_in_front_hides_the_unseen_part():
+    st, T, imgs, views = _scene(occluder=True)
+    e = arc_exposure(imgs, views, st, T, MODEL, HW)
+    assert e.both == 0.0 and (e.classes[0] == HIDDEN).sum() > 10
+
+
+def test_tissue_hides_only_where_the_needle_may_be_inside_it():
+    st, T, imgs, views = _scene(background=PINK)
+    turned = T.copy()
+    turned[:3, :3] = _rz(0.7)
+    assert arc_exposure(imgs, views, st, turned, MODEL, HW).both > 0.004
+    assert arc_exposure(imgs, views, st, turned, MODEL, HW, tissue_hides=True).both == 0.0
+    # A port 1 mm nearer, its outward normal toward the camera: the needle is under its plane.
+    T_world = st.left.T_world_cam @ turned
+    port = T_world[:3, 3] - 0.001 * st.left.T_world_cam[:3, 2]
+    normal = -st.left.T_world_cam[:3, 2]
+    inside = below_port_planes([(port, normal)])
+    e = arc_exposure(imgs, views, st, turned, MODEL, HW, inside_tissue=inside)
+    assert e.both == 0.0
+    assert (EXPOSED not in e.classes[0]) and (SEEN in e.classes[0])
+
+
+def _images_with_cover(st, full, seen, px: int = 6):
+    """Grey needle pixels on black, and over each eye's hidden wire (full minus seen mask)
+    a grey cover ``px`` wider (a jaw just over the tip)."""
+    import cv2
+
+    out = []
+    for f, v in zip(full, seen, strict=True):
+        img = np.zeros((st.left.height, st.left.width, 3), np.uint8)
+        x0, y0 = f.origin
+        h, w = f.mask.shape
+        hidden = np.zeros(img.shape[:2], np.uint8)
+        hidden[y0 : y0 + h, x0 : x0 + w] = f.mask
+        sx, sy = v.origin
+        sh, sw = v.mask.shape
+        vis = np.zeros(img.shape[:2], bool)
+        vis[sy : sy + sh, sx : sx + sw] = v.mask
+        hidden[vis] = 0
+        cover = cv2.dilate(hidden, np.ones((2 * px + 1, 2 * px + 1), np.uint8)).astype(bool)
+        img[cover | vis] = GREY
+        out.append(img)
+    return tuple(out)
+
+
+def test_the_mirror_twin_of_a_needle_behind_a_jaw_runs_over_background():
+    """test_needle_prior's twin case: the tip half behind a jaw (grey, just over the hidden
+    wire), the fit without priors answers the tilt-mirror twin > 10 mm off: the needle's
+    unseen part is under the jaw, the twin's lies over the black background."""
+    from test_needle_prior import _twin_case
+    from test_pose_fit import _scene_1080p
+
+    from suture_bt.perception.needle_localizer import MAX_EXPOSED
+    from suture_bt.perception.pose_fit import PoseFitter
+
+    st, T, occ, short, kw = _twin_case()
+    _, _, left, right, _ = _scene_1080p(10, 0.0)
+    imgs = _images_with_cover(st, (left, right), occ, px=2)
+    twin = PoseFitter(st, MODEL).fit(*occ, short, **kw).T_cam_needle
+    hw = MODEL.wire_radius * st.left.fx / T[2, 3]
+    truth = arc_exposure(imgs, tuple(occ), st, T, MODEL, hw)
+    wrong = arc_exposure(imgs, tuple(occ), st, twin, MODEL, hw)
+    assert truth.worst == 0.0
+    # Here the twin's course stays near the hidden wire in both images: 2.8 mm of it shows
+    # over background (below the refusal threshold; the twins of the held needle at the Task 3
+    # start expose 6-9 mm, see the benchmark figures in the report).
+    assert wrong.both > 0.002 and wrong.both > 2 * truth.both
+    assert MAX_EXPOSED > wrong.both
+
+
+def test_tissue_model_hides_what_the_block_is_in_front_of():
+    from suture_bt.geometry.phantom import TISSUE_TOP_Z
+    from suture_bt.perception.unseen_arc import tissue_model
+
+    eye = np.array([0.0, 0.0, 0.2])
+    block = ((-0.045, 0.045), (-0.055, 0.075))
+    inside = tissue_model(np.eye(4), [], eye, block)
+    top = TISSUE_TOP_Z
+    pts = np.array(
+        [
+            [0.0, 0.0, top - 0.005],  # in the block
+            [0.048, 0.0, top - 0.01],  # beyond its edge, behind it as the camera looks
+            [0.06, 0.0, top - 0.01],  # beyond its edge, in plain view past it
+            [0.0, 0.0, top + 0.01],  # above it
+        ]
+    )
+    assert inside(pts).tolist() == [True, True, False, False]
+    assert inside(pts, margin=0.0015).tolist() == [True, False, False, False]
+
+
+def test_localizer_refuses_the_mirror_twin_of_the_held_needle_at_the_task3_start():
+    """Development scene (seed 6173, held_start #6): the localiser used to answer the
+    tilt-mirror twin 19.5 mm / 173 deg off (residual 0.43 px, passing every other gate); its
+    arc runs 6 mm over the tissue in front of which the needle is held. With the task's
+    tissue model that is a refusal naming it (without one, any tissue-coloured pixel may hide
+    the needle and this twin is not caught)."""
+    import sys
+    from pathlib import Path
+
+    import pytest
+
+    sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "benchmarks"))
+    import needle_pose
+    import needle_task_scenes
+
+    from suture_bt.datagen.needle_data import SimScene
+    from suture_bt.perception.needle_localizer import NeedleLocalizer
+    from suture_bt.perception.pose_fit import NeedleNotFound
+    from suture_bt.perception.unseen_arc import tissue_model
+
+    sim = SimScene(1920, 1080)
+    try:
+        ci = needle_pose.SETS.index("held_start")
+        rng = np.random.default_rng([6173, ci, 6])
+        s, _ = needle_task_scenes.held_start(sim, rng)
+        sim.apply(s)
+        left, _ = sim.render("left", s, rng)
+        right, _ = sim.render("right", s, rng)
+        ph = sim.world.task.phantom
+        pairs = [tuple((p.position, p.normal) for p in ph.pair(k)) for k in range(1, 5)]
+        eye = sim.stereo.left.T_world_cam[:3, 3]
+        tissue = tissue_model(ph.T_world_phantom, pairs, eye, needle_pose.BLOCK)
+        with pytest.raises(NeedleNotFound, match="hidden by nothing"):
+            NeedleLocalizer(sim.stereo, tissue=tissue).localize(left, right)
+    finally:
+        sim.close()
