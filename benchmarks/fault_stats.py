@@ -4,7 +4,8 @@
 run). *Detected* comes only from what the tree itself saw and reported: frames the needle
 sensor captured again (lost or dark), frames the calibration lost, a needle seen dropped (the
 search for a dropped needle), the in-hand check's "slipped" and "drift" verdicts, and an
-insertion whose tip reading corrected the in-hand turn along the arc by more than 5°. A throw
+insertion that found its needle off the in-hand estimate (a tip reading turned more than 5°
+along the arc or pivoted about the jaw) or short of the exit rule (driven on). A throw
 counts under a kind when a fault of that kind fired inside its window; its outcome is the
 world's score. :class:`RecoveryTime` adds up the simulated time each recovery node spent after
 its first failure (its recovery branch and the attempts after it).
@@ -41,8 +42,9 @@ def tree_detections(session) -> dict[str, int]:
         found["drop"] += int(r.get("skill") == "find dropped needle")
         found["slip"] += int(bool(r.get("slipped")))
         found["drift"] += int(bool(r.get("drift")))
-        if abs((r.get("evidence") or {}).get("turn_deg", 0.0)) > 5.0:
-            found["slip"] += 1
+        evidence = r.get("evidence") or {}
+        moved = abs(evidence.get("turn_deg", 0.0)) > 5.0 or evidence.get("pivot_deg", 0.0)
+        found["slip"] += int(bool(moved or r.get("driven_on_deg")))
     return {k: v for k, v in found.items() if v}
 
 

@@ -4,7 +4,11 @@ Plans the circle of the needle radius through the pair's known port frames, chec
 grasp leaves room for the tip to come out (the planner's grasp limit), brings the tip above and
 then a few millimetres before the entry, sweeps the needle about its own centre until the tip
 stands 6 mm out past the exit, and confirms from a fresh image that the tip emerged within the
-SRC 2.5 mm of the exit port and stands at least 5 mm out.
+SRC 2.5 mm of the exit port and stands at least 5 mm out: from the localiser's answer, or,
+when it refuses the mostly buried needle, from the tip read in the frame near the predicted
+pose (:mod:`tip_reading`). A needle seen crossing the exit but short of the rule is driven on
+along its own circle as far as the grasp allows and looked at again (backing an emerged tip
+out would re-enter the tissue at the exit).
 
 Started again with the needle already at the end of its sweep (a retry after the emerged tip
 was not confirmed), it only looks again, after a short back-off; ``confirm_only`` asks for
@@ -15,13 +19,15 @@ from __future__ import annotations
 
 import numpy as np
 
+from suture_bt.perception.in_hand import JAW_POINT_IN_TIP
 from suture_bt.planning import NeedleArcError, gripper_poses
 from suture_bt.skills import checks
 from suture_bt.skills.base import Skill, SkillFailure, Waiting
 from suture_bt.skills.context import NeedleNotSeen, NeedleObservation, TaskContext
 from suture_bt.skills.grasps import JAW_CLEARANCE
 from suture_bt.skills.motion import FINE, follow_poses, move_to, wait
-from suture_bt.transforms import make_transform, rotation_angle, rpy_to_matrix
+from suture_bt.skills.tip_reading import read_tip
+from suture_bt.transforms import invert, rotation_angle
 
 #: The sweep starts with the tip this far (arc length) before the entry, and the approach
 #: comes down to it along the entry normal from this height (m).
@@ -30,11 +36,10 @@ PRE_ARC, LIFT = 0.006, 0.010
 SWEEP = {"angular_speed": 1.0, "angular_acc": 5.0}
 #: Looks at the emerged tip before giving up (one may follow a drive-on).
 CONFIRM_LOOKS = 3
-#: The tip is read along the arc within this turn of the in-hand estimate (deg); the circle
-#: past a reading's tip (deg of arc beyond it) must show no metal.
-SCAN_DEG, BEYOND_DEG = 30.0, (3.0, 15.0)
-#: A reading short of the exit rule is driven on by at least ``DRIVE_ON_DEG`` (or to the
-#: planned end), as far as its grasp allows, when that leaves ``MIN_DRIVE_ON_DEG`` to go.
+#: A needle seen with less than ``DRIVE_ON_BELOW`` of tip out (m; the SRC's 5 mm and half a
+#: millimetre of estimate error) is driven on by at least ``DRIVE_ON_DEG`` (or to the planned
+#: end), as far as its grasp allows, when that leaves ``MIN_DRIVE_ON_DEG`` to go.
+DRIVE_ON_BELOW = 0.0055
 DRIVE_ON_DEG, MIN_DRIVE_ON_DEG = 8.0, 1.0
 #: A needle this close to the sweep's end pose (m, deg) is already inserted; the back-off
 #: before looking again (s).
@@ -123,12 +128,19 @@ class Insert(Skill):
                     raise NeedleNotSeen(f"answer disagrees with the arm: {detail}")
             except NeedleNotSeen as e:
                 reasons.append(e.reason)
-                reading = self._tip_reading(predicted, exit_)
+                pinch = arm.tip_world()[:3, :3] @ JAW_POINT_IN_TIP + arm.tip_world()[:3, 3]
+                reading = read_tip(ctx.sensor, ctx.needle, predicted, exit_, pinch)
                 if reading is None:
-                    reasons.append("no tip seen along the predicted arc")
+                    reasons.append("no emerged tip read near the predicted pose")
                     yield
                     continue
-                T_seen, how = reading
+                self.report["evidence"] = {
+                    "turn_deg": reading.turn_deg,
+                    "pivot_deg": reading.pivot_deg,
+                    "emerged_on_metal": reading.on,
+                    "beyond_on_metal": reading.off,
+                }
+                T_seen, how = reading.T_world_needle, reading.describe()
                 ctx.believe(
                     NeedleObservation(T_seen, ctx.clock.now(), 0.0, 0.0, "image-read tip"),
                     self.arm_name,
@@ -138,64 +150,22 @@ class Insert(Skill):
                 yield from self._judge(T_seen, exit_, how)
                 return
             ctx.believe(obs, self.arm_name)
+            if (yield from self._drive_on(arm, obs.T_world_needle, exit_)):
+                continue
             yield from self._judge(obs.T_world_needle, exit_, "localised")
             return
         raise SkillFailure(f"pair {self.pair}: emerged tip not confirmed: {'; '.join(reasons)}")
 
-    def _tip_reading(self, predicted: np.ndarray, exit_) -> tuple[np.ndarray, str] | None:
-        """The needle on the predicted circle turned along it to where the last frame shows
-        the tip: the least advanced turn (within ``SCAN_DEG``) whose emerged piece is seen as
-        metal and whose circle continued past the tip is not. The in-hand estimate's turn
-        along the arc is its least certain part (an end may have been hidden when it was made),
-        and the least advanced reading also puts the jaws nearest the entry. None: no turn
-        fits (the frame shows no emerged tip, or was lost)."""
-        needle = self.context.needle
-        step = np.deg2rad(0.5)
-        grid = needle.tip_angle + np.arange(
-            np.deg2rad(-SCAN_DEG - BEYOND_DEG[1]), np.deg2rad(SCAN_DEG + 90.0), step
-        )
-        try:
-            left, right = self.context.sensor.hits(predicted, grid)
-        except NeedleNotSeen:
-            return None
-
-        def share(angles: np.ndarray) -> float:
-            i = np.clip(np.rint((angles - grid[0]) / step).astype(int), 0, len(grid) - 1)
-            return min(float(left[i].mean()), float(right[i].mean()))
-
-        for turn in np.deg2rad(np.arange(-SCAN_DEG, SCAN_DEG + 0.01, 1.0)):
-            # advanced by ``turn`` along the sweep (which turns the needle about its own −z)
-            T = predicted @ make_transform(rpy_to_matrix((0.0, 0.0, -turn)))
-            out = self._tip_out(T, exit_)
-            if out < checks.MIN_TIP_OUT * 0.5:
-                continue
-            # The piece in front of the exit surface (1 mm kept clear of it), and the circle
-            # continued past the tip, in the predicted needle's angles.
-            emerged = needle.tip_angle - turn + np.linspace(0.0, (out - 0.001) / needle.radius, 12)
-            beyond = needle.tip_angle - turn - np.deg2rad(np.linspace(*BEYOND_DEG, 8))
-            on, off = share(emerged), share(beyond)
-            if on >= 0.75 and off <= 0.25:
-                self.report["evidence"] = {
-                    "turn_deg": float(np.rad2deg(turn)),
-                    "emerged_on_metal": on,
-                    "beyond_on_metal": off,
-                }
-                return T, (
-                    f"tip read {np.rad2deg(turn):+.0f}° along the arc from the in-hand estimate: "
-                    f"{100 * on:.0f} % of its emerged piece seen, {100 * off:.0f} % past it"
-                )
-        return None
-
-    def _tip_out(self, T_world_needle: np.ndarray, exit_) -> float:
-        """Tip out past the exit (m) of a needle pose, 0 when it does not cross the exit."""
-        _, _, numbers = checks.tip_out_past_exit(T_world_needle, self.context.needle, exit_)
-        return 1e-3 * numbers.get("tip_out_mm", 0.0)
-
     def _drive_on(self, arm, T_seen: np.ndarray, exit_) -> Waiting:
-        """Sweep on along the arc to the planned end when the reading's tip is short of the
-        exit rule and its grasp leaves room (once per insertion); True if the needle moved."""
-        ok, _, _ = checks.tip_out_past_exit(T_seen, self.context.needle, exit_)
-        if ok or "driven_on_deg" in self.report:
+        """Sweep the needle on about its own centre (it runs in its own track) by at least
+        ``DRIVE_ON_DEG`` or to the planned end, as far as the reading's grasp allows, when the
+        seen tip crosses the exit within the rule but stands less than ``DRIVE_ON_BELOW`` out
+        (once per insertion); True if it moved."""
+        _, _, seen = checks.tip_out_past_exit(T_seen, self.context.needle, exit_)
+        crossing = seen and seen["lateral_mm"] <= 1e3 * checks.MAX_LATERAL
+        if not crossing or seen["tip_out_mm"] >= 1e3 * DRIVE_ON_BELOW:
+            return False
+        if "driven_on_deg" in self.report:
             return False
         arc = self.arc
         T_gn = self.context.belief.T_tip_needle
@@ -206,9 +176,11 @@ class Insert(Skill):
             return False
         self.report["driven_on_deg"] = float(np.rad2deg(end - phi))
         self.say(
-            f"pair {self.pair}: tip short, driving on {np.rad2deg(end - phi):.1f}° along the arc"
+            f"pair {self.pair}: tip short, driving on {np.rad2deg(end - phi):.1f}° along its arc"
         )
-        on = gripper_poses(arc.sweep(phi, end, **SWEEP), T_gn)
+        # The planned sweep's timing and turns, carried onto the seen needle's own circle.
+        on = arc.sweep(phi, end, **SWEEP).transformed(T_left=T_seen @ invert(arc.needle_pose(phi)))
+        on = gripper_poses(on, T_gn)
         yield from follow_poses(self.context.clock, arm, on, f"pair {self.pair}: drive on")
         return True
 

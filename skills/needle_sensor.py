@@ -21,7 +21,7 @@ from __future__ import annotations
 import numpy as np
 
 from suture_bt.interfaces import FrameLost, StereoCameraInterface
-from suture_bt.perception.arc_evidence import arc_hits
+from suture_bt.perception.arc_evidence import arc_hits, metal_masks
 from suture_bt.perception.in_hand import JAW_POINT_IN_TIP
 from suture_bt.perception.needle_localizer import NeedleLocalizer
 from suture_bt.perception.needle_prior import HeldPrior, NeedlePrior, PredictedPosePrior
@@ -66,6 +66,7 @@ class VisionNeedleSensor:
         #: Bad frames re-captured so far, as (kind, reason) (kind: "lost" or "dark").
         self.bad_frames: list[tuple[str, str]] = []
         self._reference: float | None = None  # brightness of the last good frame
+        self._masks = None  # (frame, its metal masks) for hits()
 
     def observe(
         self,
@@ -166,6 +167,13 @@ class VisionNeedleSensor:
         if self.last_frame is None:
             raise NeedleNotSeen("no frame captured yet")
         f = self.last_frame
+        if self._masks is None or self._masks[0] is not f:  # once per frame
+            self._masks = (f, metal_masks((f.left, f.right)))
         return arc_hits(
-            (f.left, f.right), self.camera.model, T_world_needle, self.localizer.model, angles
+            (f.left, f.right),
+            self.camera.model,
+            T_world_needle,
+            self.localizer.model,
+            angles,
+            masks=self._masks[1],
         )

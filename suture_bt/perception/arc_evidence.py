@@ -18,6 +18,17 @@ from suture_bt.interfaces import StereoCameraModel
 from suture_bt.perception.colour_refine import ColourRule, needle_coloured
 
 
+def metal_masks(
+    images: tuple[np.ndarray, np.ndarray], reach_px: int = 4, rule: ColourRule | None = None
+) -> tuple[np.ndarray, np.ndarray]:
+    """Needle-coloured pixels of each eye, grown by ``reach_px`` (what :func:`arc_hits` reads;
+    compute once per frame when asking about many poses)."""
+    rule = rule or ColourRule()
+    kernel = cv2.getStructuringElement(cv2.MORPH_ELLIPSE, (2 * reach_px + 1, 2 * reach_px + 1))
+    grown = [cv2.dilate(needle_coloured(img, rule).astype(np.uint8), kernel) > 0 for img in images]
+    return grown[0], grown[1]
+
+
 def arc_hits(
     images: tuple[np.ndarray, np.ndarray],
     stereo: StereoCameraModel,
@@ -26,15 +37,14 @@ def arc_hits(
     angles: np.ndarray,
     reach_px: int = 4,
     rule: ColourRule | None = None,
+    masks: tuple[np.ndarray, np.ndarray] | None = None,
 ) -> tuple[np.ndarray, np.ndarray]:
     """Per centre-line sample at ``angles``: seen as metal, per eye (left, right)."""
-    rule = rule or ColourRule()
+    masks = masks if masks is not None else metal_masks(images, reach_px, rule)
     pts = needle.point_at(np.asarray(angles, dtype=float))
     world = pts @ np.asarray(T_world_needle)[:3, :3].T + np.asarray(T_world_needle)[:3, 3]
     out = []
-    kernel = cv2.getStructuringElement(cv2.MORPH_ELLIPSE, (2 * reach_px + 1, 2 * reach_px + 1))
-    for img, cam in zip(images, (stereo.left, stereo.right), strict=True):
-        metal = cv2.dilate(needle_coloured(img, rule).astype(np.uint8), kernel) > 0
+    for metal, cam in zip(masks, (stereo.left, stereo.right), strict=True):
         uv = np.rint(cam.project(world)).astype(int)
         h, w = metal.shape
         inside = (uv[:, 0] >= 0) & (uv[:, 0] < w) & (uv[:, 1] >= 0) & (uv[:, 1] < h)

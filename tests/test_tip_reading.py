@@ -1,6 +1,4 @@
-"""Insert's tip reading: where the frame shows the emerged tip along the predicted circle."""
-
-from types import SimpleNamespace
+"""Tip reading: where the frame shows the emerged tip near the predicted pose."""
 
 import numpy as np
 import pytest
@@ -8,7 +6,8 @@ import pytest
 from suture_bt.geometry import NeedleModel, PhantomModel
 from suture_bt.planning import plan_needle_arc
 from suture_bt.skills.context import NeedleNotSeen
-from suture_bt.skills.insert import Insert
+from suture_bt.skills.grasps import hand, tip_goal
+from suture_bt.skills.tip_reading import pivoted, read_tip, tip_out
 from suture_bt.transforms import make_transform, rpy_to_matrix
 
 NEEDLE = NeedleModel()
@@ -39,10 +38,12 @@ class FrameOf:
         return h, h.copy()
 
 
-def reading(T_true, everywhere=False):
-    ctx = SimpleNamespace(needle=NEEDLE, sensor=FrameOf(T_true, everywhere), arms={})
-    skill = Insert(ctx, "psm2", 2)
-    return skill._tip_reading(PLANNED, EXIT), skill
+#: The insertion grasp's pinch point at the planned end (160° along the arc).
+PINCH = tip_goal(PLANNED, hand(NEEDLE, np.deg2rad(160.0)))[:3, 3]
+
+
+def reading(T_true, everywhere=False, pinch=PINCH):
+    return read_tip(FrameOf(T_true, everywhere), NEEDLE, PLANNED, EXIT, pinch)
 
 
 def along(T, deg):
@@ -51,23 +52,31 @@ def along(T, deg):
 
 
 def test_a_needle_where_the_arm_says_is_read_within_a_few_degrees():
-    (T, how), skill = reading(PLANNED)
-    turn = skill.report["evidence"]["turn_deg"]
-    assert -5.0 <= turn <= 0.0 and "along the arc" in how
+    r = reading(PLANNED)
+    assert -5.0 <= r.turn_deg <= 0.0 and r.pivot_deg == 0.0 and "along the arc" in r.describe()
 
 
 @pytest.mark.parametrize("short_deg", [8.0, 13.5, 20.0])
 def test_a_needle_short_along_its_arc_is_read_short_never_longer(short_deg):
-    (T, _), skill = reading(along(PLANNED, -short_deg))
-    turn = skill.report["evidence"]["turn_deg"]
-    assert -short_deg - 5.0 <= turn <= -short_deg
-    assert skill._tip_out(T, EXIT) < skill._tip_out(along(PLANNED, -short_deg), EXIT) + 1e-4
+    true = along(PLANNED, -short_deg)
+    r = reading(true)
+    assert -short_deg - 5.0 <= r.turn_deg <= -short_deg and r.pivot_deg == 0.0
+    assert tip_out(r.T_world_needle, NEEDLE, EXIT) < tip_out(true, NEEDLE, EXIT) + 1e-4
+
+
+@pytest.mark.parametrize("pivot", [-4.5, 3.0])
+def test_a_needle_that_slipped_about_the_jaw_is_read_on_its_own_circle(pivot):
+    true = along(pivoted(PLANNED, PINCH, pivot), -6.0)
+    r = reading(true)
+    assert r is not None and r.pivot_deg == pytest.approx(pivot, abs=1.6)
+    assert np.linalg.norm(r.T_world_needle[:3, 3] - true[:3, 3]) < 0.0006
+    assert reading(true, pinch=None) is None  # on the predicted circle alone: no reading
 
 
 def test_no_metal_or_metal_everywhere_is_no_reading():
-    assert reading(None)[0] is None  # no emerged tip in the frame
-    assert reading(None, everywhere=True)[0] is None  # a jaw behind it: nothing ends anywhere
+    assert reading(None) is None  # no emerged tip in the frame
+    assert reading(None, everywhere=True) is None  # a jaw behind it: nothing ends anywhere
 
 
 def test_a_needle_still_under_the_surface_is_no_reading():
-    assert reading(along(PLANNED, -40.0))[0] is None
+    assert reading(along(PLANNED, -40.0)) is None

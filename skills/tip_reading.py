@@ -1,0 +1,119 @@
+"""Read where an emerged needle tip stands from one frame, around the pose the arm predicts.
+
+When the localiser refuses a needle that is mostly inside the tissue, the frame still shows its
+emerged piece. The hypotheses are poses near the prediction: turned along the needle's own
+circle (the in-hand estimate's least certain part is where along the arc the jaw holds it) and,
+for a needle that slipped in the jaw on contact with the tissue, also turned in its plane about
+the jaw's pinch point by up to ``PIVOT_DEG``. A hypothesis *reads* when the frame shows metal
+along its emerged piece and none along its circle continued past its tip. Of the readings on
+the predicted circle the least advanced is taken (it also puts the jaws nearest the entry);
+pivoted hypotheses are tried only when none on the circle reads, the smallest pivot first.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+from scipy.spatial.transform import Rotation
+
+from suture_bt.geometry import NeedleModel, Port
+from suture_bt.skills import checks
+from suture_bt.skills.context import NeedleNotSeen, NeedleSensor
+from suture_bt.transforms import make_transform, rpy_to_matrix
+
+#: Turns along the circle tried (deg, + = further in) and pivots about the pinch point (deg).
+SCAN_DEG = 30.0
+PIVOT_DEG = (1.5, -1.5, 3.0, -3.0, 4.5, -4.5, 6.0, -6.0)
+#: The circle past a reading's tip (deg of arc beyond it) must show no metal.
+BEYOND_DEG = (3.0, 15.0)
+#: Shares of the emerged piece that must be seen as metal, and of the piece past the tip
+#: that may be.
+MIN_ON, MAX_OFF = 0.75, 0.25
+#: Grid step (deg) of the centre-line samples asked of the frame.
+STEP_DEG = 0.5
+
+
+@dataclass(frozen=True)
+class TipReading:
+    """A pose the frame supports: ``turn_deg`` along the circle and ``pivot_deg`` about the
+    pinch point from the prediction, with the shares seen on and past the emerged piece."""
+
+    T_world_needle: np.ndarray
+    turn_deg: float
+    pivot_deg: float
+    on: float
+    off: float
+
+    def describe(self) -> str:
+        pivot = f", turned {self.pivot_deg:+.1f}° about the jaw" if self.pivot_deg else ""
+        return (
+            f"tip read {self.turn_deg:+.0f}° along the arc from the in-hand estimate{pivot}: "
+            f"{100 * self.on:.0f} % of its emerged piece seen, {100 * self.off:.0f} % past it"
+        )
+
+
+def tip_out(T_world_needle: np.ndarray, needle: NeedleModel, exit_: Port) -> float:
+    """Tip out past the exit (m) of a needle pose; 0 when it does not cross the exit."""
+    _, _, numbers = checks.tip_out_past_exit(T_world_needle, needle, exit_)
+    return 1e-3 * numbers.get("tip_out_mm", 0.0)
+
+
+def pivoted(T_world_needle: np.ndarray, pinch: np.ndarray, deg: float) -> np.ndarray:
+    """The needle turned ``deg`` in its own plane about the world point ``pinch``."""
+    R = Rotation.from_rotvec(np.deg2rad(deg) * T_world_needle[:3, 2]).as_matrix()
+    T = np.array(T_world_needle, dtype=float)
+    T[:3, :3] = R @ T[:3, :3]
+    T[:3, 3] = pinch + R @ (T[:3, 3] - pinch)
+    return T
+
+
+def read_tip(
+    sensor: NeedleSensor,
+    needle: NeedleModel,
+    predicted: np.ndarray,
+    exit_: Port,
+    pinch: np.ndarray | None = None,
+) -> TipReading | None:
+    """The reading of the sensor's last frame (see the module docstring); None when no
+    hypothesis reads (no emerged tip in the frame, or no frame). Without ``pinch`` only the
+    predicted circle is tried."""
+    pivots = (0.0,) + (PIVOT_DEG if pinch is not None else ())
+    for pivot in pivots:
+        base = predicted if pivot == 0.0 else pivoted(predicted, pinch, pivot)
+        try:
+            found = _along_circle(sensor, needle, base, exit_)
+        except NeedleNotSeen:
+            return None
+        if found is not None:
+            T, turn, on, off = found
+            return TipReading(T, turn, pivot, on, off)
+    return None
+
+
+def _along_circle(sensor: NeedleSensor, needle: NeedleModel, base: np.ndarray, exit_: Port):
+    """(pose, turn deg, on, off) of the least advanced turn of ``base`` that reads, or None."""
+    step = np.deg2rad(STEP_DEG)
+    grid = needle.tip_angle + np.arange(
+        np.deg2rad(-SCAN_DEG - BEYOND_DEG[1]), np.deg2rad(SCAN_DEG + 90.0), step
+    )
+    left, right = sensor.hits(base, grid)
+
+    def share(angles: np.ndarray) -> float:
+        i = np.clip(np.rint((angles - grid[0]) / step).astype(int), 0, len(grid) - 1)
+        return min(float(left[i].mean()), float(right[i].mean()))
+
+    for turn in np.deg2rad(np.arange(-SCAN_DEG, SCAN_DEG + 0.01, 1.0)):
+        # advanced by ``turn`` along the sweep (which turns the needle about its own −z)
+        T = base @ make_transform(rpy_to_matrix((0.0, 0.0, -turn)))
+        out = tip_out(T, needle, exit_)
+        if out < checks.MIN_TIP_OUT * 0.5:
+            continue
+        # The piece in front of the exit surface (1 mm kept clear of it), and the circle
+        # continued past the tip, in the base needle's angles.
+        emerged = needle.tip_angle - turn + np.linspace(0.0, (out - 0.001) / needle.radius, 12)
+        beyond = needle.tip_angle - turn - np.deg2rad(np.linspace(*BEYOND_DEG, 8))
+        on, off = share(emerged), share(beyond)
+        if on >= MIN_ON and off <= MAX_OFF:
+            return T, float(np.rad2deg(turn)), on, off
+    return None
