@@ -297,6 +297,7 @@ def _localize_row(loc, left, right, T_true, priors, R_swap) -> dict:
         "keypoint_end_px": _keypoint_end_px(loc, est),
         "end_exposed_mm": [1e3 * x for x in est.exposure.end_exposed],
         "seen_inside_mm": 1e3 * est.exposure.seen_inside,
+        "total_exposed_mm": [1e3 * x for x in est.exposure.total_exposed],
     }
 
 

@@ -60,6 +60,8 @@ class ArcExposure:
     #: Arc (m) seen in both eyes although the pose puts it deep inside the tissue (more than
     #: ``DEEP`` under its surface), where the tissue would hide it: the pose is wrong.
     seen_inside: float = 0.0
+    #: All exposed samples of each eye together (m of arc), runs or not.
+    total_exposed: tuple[float, float] = (0.0, 0.0)
 
     @property
     def worst(self) -> float:
@@ -70,6 +72,11 @@ class ArcExposure:
     def both(self) -> float:
         """The shorter of the two eyes' exposed runs (m): wire missing in both eyes."""
         return float(min(self.longest_exposed))
+
+    @property
+    def both_total(self) -> float:
+        """The smaller of the two eyes' total exposed arc (m), runs or not."""
+        return float(min(self.total_exposed))
 
 
 def _longest_run(flags: np.ndarray) -> int:
@@ -107,7 +114,7 @@ def arc_exposure(
         else np.asarray(inside_tissue(world, margin=DEEP))
     )
     step = model.radius * (angles[1] - angles[0])
-    classes, runs, ends = [], [], []
+    classes, runs, ends, totals = [], [], [], []
     for img, view, cam in zip(images, views, (stereo.left, stereo.right), strict=True):
         uv = cam.project(world)
         H, W = img.shape[:2]
@@ -156,6 +163,7 @@ def arc_exposure(
         classes.append(cls)
         runs.append(_longest_run(cls == EXPOSED) * step)
         ex = cls == EXPOSED
+        totals.append(float(ex.sum() * step))
         ends.append(max(_leading(ex), _leading(ex[::-1])) * step)
     seen_deep = (classes[0] == SEEN) & (classes[1] == SEEN) & deep
     return ArcExposure(
@@ -163,6 +171,7 @@ def arc_exposure(
         (runs[0], runs[1]),
         (ends[0], ends[1]),
         float(seen_deep.sum() * step),
+        (totals[0], totals[1]),
     )
 
 
