@@ -61,6 +61,23 @@ def test_lost_frames_are_captured_again_in_calibration_and_localisation(session)
 
 
 @pytest.mark.slow
+def test_darkened_frames_are_captured_again_and_a_lighting_change_is_lived_with(session):
+    # The sensor knows the light by then (its last good frame): the confirmation's captures
+    # come back dark and are captured again; then the light changes while PSM1 pulls.
+    assert session.run_until(running(session, "Insert pair 1", "driving")) is not None
+    session.world.faults.darken(2, brightness=0.2)
+    assert session.run_until(running(session, "Extract pair 1")) is not None
+    session.world.faults.change_lighting(4.0, brightness=0.75, tilt_deg=15.0)
+    throw = finish(session)
+    assert throw["status"] == "SUCCESS", throw["reason"]
+    assert passed(session), session.scores()[0].failure
+    dark = [k for k, _ in session.context.sensor.bad_frames if k == "dark"]
+    assert len(dark) == 2
+    fired = {e.kind for e in GroundTruth(session.world).fault_events()}
+    assert {"dark", "lighting"} <= fired
+
+
+@pytest.mark.slow
 def test_unconfirmed_insertion_is_looked_at_again_and_confirmed(session):
     assert session.run_until(running(session, "Insert pair 1", "driving the needle")) is not None
     # Every confirmation look loses all its frames: the emerged tip is not confirmed.
