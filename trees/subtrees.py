@@ -83,18 +83,10 @@ def prepare(pairs: tuple[int, ...]) -> py_trees.behaviour.Behaviour:
         children=[
             Calibrate(PULLER),
             Localize(INSERTER),
-            retried_handover(
-                HandOver(
-                    INSERTER,
-                    PULLER,
-                    away_from_holder_and(grasp),
-                    pulling=True,
-                    name="PSM2 hands the needle to PSM1",
-                )
-            ),
-            Calibrate(INSERTER),
-            retried_handover(
-                HandOver(PULLER, INSERTER, grasp, next_pair=pairs[0], name="PSM1 hands it back")
+            *calibrate_psm2_via_psm1(
+                grasp,
+                pairs[0],
+                ("PSM2 hands the needle to PSM1", "Calibrate PSM2", "PSM1 hands it back"),
             ),
         ],
     )
@@ -115,6 +107,21 @@ def prepare(pairs: tuple[int, ...]) -> py_trees.behaviour.Behaviour:
         "Prepare", memory=True, children=[NeedleStart(INSERTER), choose]
     )
     return SimTimeout("Prepare (time limit)", seq, PREPARE_LIMIT)
+
+
+def calibrate_psm2_via_psm1(
+    grasp, next_pair: int, names: tuple[str, str, str]
+) -> list[py_trees.behaviour.Behaviour]:
+    """PSM2 hands the needle to PSM1, is calibrated with its jaw empty, and takes it back at
+    ``grasp`` (calibration needs an empty jaw); ``names``: the three steps' names."""
+    give, calibrate, back = names
+    return [
+        retried_handover(
+            HandOver(INSERTER, PULLER, away_from_holder_and(grasp), pulling=True, name=give)
+        ),
+        Calibrate(INSERTER, name=calibrate),
+        retried_handover(HandOver(PULLER, INSERTER, grasp, next_pair=next_pair, name=back)),
+    ]
 
 
 def in_reach(pairs: tuple[int, ...]) -> py_trees.behaviour.Behaviour:
@@ -207,24 +214,14 @@ def checked_in_hand(pair: int, later_pairs: tuple[int, ...]) -> py_trees.behavio
         memory=True,
         children=[
             CalibrationLost(INSERTER),
-            retried_handover(
-                HandOver(
-                    INSERTER,
-                    PULLER,
-                    away_from_holder_and(grasp),
-                    pulling=True,
-                    name=f"PSM2 hands the needle to PSM1 to recalibrate (pair {pair})",
-                )
-            ),
-            Calibrate(INSERTER, name=f"Recalibrate PSM2 (pair {pair}, empty jaw)"),
-            retried_handover(
-                HandOver(
-                    PULLER,
-                    INSERTER,
-                    grasp,
-                    next_pair=pair,
-                    name=f"PSM1 hands it back recalibrated (pair {pair})",
-                )
+            *calibrate_psm2_via_psm1(
+                grasp,
+                pair,
+                (
+                    f"PSM2 hands the needle to PSM1 to recalibrate (pair {pair})",
+                    f"Recalibrate PSM2 (pair {pair}, empty jaw)",
+                    f"PSM1 hands it back recalibrated (pair {pair})",
+                ),
             ),
         ],
     )
