@@ -34,6 +34,7 @@ import pybullet as p
 
 from suture_bt.geometry.needle import NeedleModel
 from suture_bt.geometry.phantom import PORT_MARK_SIZE, TISSUE_TOP_Z, PhantomModel, Port
+from suture_bt.geometry.tissue_surface import RIDGE_END_MARGIN
 from suture_bt.sim.rendering import load_renderer
 from suture_bt.transforms import invert, make_transform, quat_xyzw
 
@@ -46,8 +47,6 @@ SLAB_THICKNESS = 0.002
 SLAB_SINK = 0.002
 #: Height step of the boxes that fill the ridge behind the slabs.
 FILL_LAYER = 0.001
-#: How far the ridge runs past the outer pairs (m).
-RIDGE_END_MARGIN = 0.012
 MARK_THICKNESS = 0.0002
 #: A large dark floor under the tissue: the body cavity seen around the phantom (every view
 #: ray of the endoscope ends on it, so images need no background fill).

@@ -14,10 +14,15 @@ from __future__ import annotations
 import numpy as np
 
 from suture_bt.calibration.calibrate import Calibration
+from suture_bt.calibration.calibration_pose import CALIBRATION_POSES
 from suture_bt.interfaces import FrameLost
+from suture_bt.kinematics import forward_kinematics
+from suture_bt.skills import presentation
 from suture_bt.skills.base import Skill, SkillFailure, Waiting
 from suture_bt.skills.context import TaskContext
-from suture_bt.skills.motion import wait
+from suture_bt.skills.line_of_sight import CLEARANCE, intrusion
+from suture_bt.skills.motion import move_to, wait
+from suture_bt.skills.tip_uncertainty import worst_offset_displacement
 
 #: Lost frames in a row before the calibration gives up, and the back-off between tries (s).
 MAX_LOST_FRAMES = 3
@@ -27,6 +32,7 @@ FRAME_BACK_OFF = 0.1
 #: Joint speed of the move to the calibration pose (rad/s; the insertion joint a tenth in
 #: m/s; smoothstep, so the peak is 1.5 times this): the arm settles before the image is taken.
 APPROACH_SPEED = 1.0
+
 
 class CalibrateArm(Skill):
     """Calibrate ``arm`` (psm1 or psm2)."""
@@ -42,6 +48,7 @@ class CalibrateArm(Skill):
         handle = ctx.arm(self.arm_name)
         if ctx.belief is not None and ctx.belief.holder == self.arm_name:
             raise SkillFailure(f"{self.arm_name} holds the needle: calibration needs an empty jaw")
+        yield from self._holder_makes_way()
         self.say(f"calibrating {self.arm_name}: moving to the calibration pose")
         cal = Calibration(handle.arm, ctx.camera, handle.servo, speed=APPROACH_SPEED)
         cal.start()
@@ -77,3 +84,29 @@ class CalibrateArm(Skill):
             f"{self.arm_name} calibrated: Δq̂ = ({np.rad2deg(dq[0]):+.2f}°, "
             f"{np.rad2deg(dq[1]):+.2f}°, {1e3 * dq[2]:+.2f} mm)"
         )
+
+    def _holder_makes_way(self) -> Waiting:
+        """An arm holding the needle (and the needle) that stands in the cameras' sight of this
+        arm's jaw at the calibration pose (which may lie as far from its kinematic place as the
+        offset bound allows) moves to a presentation pose clear of it: a presentation keeps
+        the needle clear of the tissue. Nothing moves when it is clear, or no such pose is."""
+        ctx = self.context
+        b = ctx.belief
+        if b is None or b.holder is None or b.holder == self.arm_name:
+            return
+        holder = ctx.arm(b.holder)
+        q_cal = CALIBRATION_POSES[self.arm_name]
+        jaw = (ctx.arm(self.arm_name).base_frame() @ forward_kinematics(q_cal))[:3, 3]
+        spread = CLEARANCE + worst_offset_displacement(q_cal)
+        rcm = holder.base_frame()[:3, 3]
+
+        def clear(T) -> str:
+            return "in the sight of the jaw" if intrusion(ctx, T, rcm, jaw, spread) > 0 else ""
+
+        if not clear(holder.commanded_tip_world()):
+            return
+        poses, _ = presentation.choose(ctx, holder, clear)
+        if poses:
+            self.say(f"calibrating {self.arm_name}: {holder.name} takes the needle out of sight")
+            path = presentation.lifted_first(ctx, holder, poses[0])
+            yield from move_to(ctx.clock, holder, path, "out of the cameras' sight")

@@ -90,7 +90,9 @@ class Handover(Skill):
             goal = tip_goal(T_giver @ belief.T_tip_needle, T_hand)
             return feasible(taker, [backed_off(goal, APPROACH), goal])
 
-        poses, why = presentation.choose(ctx, giver, taker_can_reach)
+        # On the taker's side: it takes the needle without crossing the scene, and keeps it
+        # out of the way of what the giver does next.
+        poses, why = presentation.choose(ctx, giver, taker_can_reach, toward=taker)
         if not poses:
             raise SkillFailure(
                 f"hand over: no pose where {self.giver} shows the needle and {self.taker} "

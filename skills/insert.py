@@ -25,13 +25,15 @@ from suture_bt.skills import checks
 from suture_bt.skills.base import Skill, SkillFailure, Waiting
 from suture_bt.skills.context import NeedleNotSeen, NeedleObservation, TaskContext
 from suture_bt.skills.grasps import JAW_CLEARANCE
-from suture_bt.skills.motion import FINE, follow_poses, move_to, wait
+from suture_bt.skills.motion import FINE, feasible, follow_poses, move_to, wait
 from suture_bt.skills.tip_reading import read_tip
 from suture_bt.transforms import invert, rotation_angle
 
 #: The sweep starts with the tip this far (arc length) before the entry, and the approach
 #: comes down to it along the entry normal from this height (m).
 PRE_ARC, LIFT = 0.006, 0.010
+#: Height above the approach pose (m) at which the arm turns to it before coming down.
+TURN_HEIGHT = 0.015
 #: Needle sweep limits (rad/s, rad/s²): the tip moves at up to 10 mm/s.
 SWEEP = {"angular_speed": 1.0, "angular_acc": 5.0}
 #: Looks at the emerged tip before giving up (one may follow a drive-on).
@@ -88,9 +90,14 @@ class Insert(Skill):
         self.report["T_tip_needle"] = np.asarray(T_gn, dtype=float).tolist()  # sweep's grasp
         T_inv = np.linalg.inv(T_gn)
         lift, pre = (T @ T_inv for T in arc.approach_poses(PRE_ARC, LIFT))
+        # Turned to the approach's orientation high above it first, then down: a joint move
+        # straight from a presentation would swing the needle low over the ridge.
+        high = lift.copy()
+        high[:3, 3] += TURN_HEIGHT * ctx.phantom.T_world_phantom[:3, 2]
+        path = [lift] if feasible(arm, [high, lift]) else [high, lift]  # "" = feasible
         self.say(f"{where}: approaching {entry.name}")
         try:
-            yield from move_to(ctx.clock, arm, [lift], "approach the entry")
+            yield from move_to(ctx.clock, arm, path, "approach the entry")
             yield from move_to(ctx.clock, arm, [pre], "reach the entry", FINE, joint_ok=False)
         except SkillFailure as e:
             raise SkillFailure(

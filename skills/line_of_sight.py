@@ -34,8 +34,15 @@ def _tool_points(T_tip: np.ndarray, rcm: np.ndarray) -> np.ndarray:
     return tip + np.linspace(0.0, TOOL_LENGTH, 9)[:, None] * back
 
 
-def intrusion(ctx: TaskContext, T_tip: np.ndarray, rcm: np.ndarray, target: np.ndarray) -> float:
-    """How far (m) the tool reaches into the free radius of a sight line (0: clear)."""
+def intrusion(
+    ctx: TaskContext,
+    T_tip: np.ndarray,
+    rcm: np.ndarray,
+    target: np.ndarray,
+    clearance: float = CLEARANCE,
+) -> float:
+    """How far (m) the tool reaches into a free radius (``clearance``) of a sight line from
+    either eye to ``target`` (0: clear)."""
     worst = 0.0
     for eye in _eyes(ctx):
         ray = target - eye
@@ -45,7 +52,7 @@ def intrusion(ctx: TaskContext, T_tip: np.ndarray, rcm: np.ndarray, target: np.n
             s = float(np.dot(p - eye, u))
             if 0.0 < s < length:  # between the eye and the target
                 d = float(np.linalg.norm((p - eye) - s * u))
-                worst = max(worst, CLEARANCE - d)
+                worst = max(worst, clearance - d)
     return worst
 
 

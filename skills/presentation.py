@@ -3,36 +3,56 @@
 At the SRC Task 3 start the held needle is 30-48 mm from the cameras and edge-on, where the
 localiser refuses or errs; held 55-85 mm away with its plane turned toward the cameras it is
 localised to about 0.1 mm / 0.5° (measured). A presentation pose puts the jaw's pinch point at
-``DEPTH`` in front of the left camera, high enough above the known ports to be clear of the
-tissue, and turns the jaw (whose axis is the needle plane's normal) from a small set of
-directions toward the line of sight. Everything is derived from the camera model and the port
-frames, so a moved or rotated phantom or another arm works the same.
+one of a grid of points in view (about ``DEPTH`` in front of the left camera, nearest the image
+centre first) and turns the jaw (whose axis is the needle plane's normal) from a small set of
+directions toward the line of sight.
+
+A pose is safe when every place the held needle may be stays ``MIN_NEEDLE_CLEARANCE`` above
+the known tissue surface under it (the flat top and the ridge of the ports,
+:mod:`suture_bt.geometry.tissue_surface`): the needle's arc as believed, or, not localised yet,
+the whole circle on either side of the jaw; each moved by every tip displacement the task's
+offset bound allows an uncalibrated arm. Safe poses come first (nearest point, then least
+wrist bend); the others only after, highest first. Everything is derived from the camera model,
+the port frames and the arm's joints, so a moved, rotated or tilted phantom works the same.
 """
 
 from __future__ import annotations
 
-from collections.abc import Callable
+from collections.abc import Callable, Iterator
+from itertools import islice
 
 import numpy as np
 
+from suture_bt.geometry.tissue_surface import height_above_tissue
 from suture_bt.kinematics import UnreachablePoseError, inverse_kinematics
 from suture_bt.planning import to_base
 from suture_bt.skills.context import ArmHandle, TaskContext
 from suture_bt.skills.grasps import GRASP_DEPTH
 from suture_bt.skills.motion import feasible
-from suture_bt.skills.tip_uncertainty import tip_margin
+from suture_bt.skills.tip_uncertainty import offset_displacements, tip_margin
 from suture_bt.transforms import make_transform
 
-#: Distance of the pinch point in front of the left camera (m, along its optical axis).
+#: Preferred distance of the pinch point in front of the left camera (m, optical axis).
 DEPTH = 0.062
-#: Smallest height of the pinch point above every port, along the phantom's up axis (m).
+#: Distances tried (m), the preferred one first.
+DEPTHS = (DEPTH, 0.056, 0.068)
+#: Image-plane offsets of the pinch point (camera frame, m): x toward the arm's own side
+#: (s = +1), y up the image when negative.
+X_OFFSETS = (0.0, 0.008, -0.008, 0.016, -0.016, 0.024)
+Y_OFFSETS = tuple(-0.004 * k for k in range(8))
+#: Smallest height of the pinch point above every port for the lift on the way
+#: (:func:`lifted_first`, m).
 MIN_CLEARANCE = 0.02
-#: Smallest height of the held needle's lowest point above the highest port when presented
-#: (m): a presentation that would hang it lower is tried last.
-MIN_NEEDLE_CLEARANCE = 0.004
-#: Image-plane offsets (camera x, y; m) tried for the pinch point, nearest the centre first.
-OFFSETS = [(0.0, -0.004 * k) for k in range(0, 8)]
-#: Jaw-axis directions in the camera frame (x toward the arm's own side is s = +1).
+#: Smallest height (m) of every place the held needle may be above the tissue under it.
+MIN_NEEDLE_CLEARANCE = 0.008
+#: Pixels the needle's possible extent keeps from the image border, in both eyes.
+VIEW_MARGIN_PX = 30
+#: Share of the offset displacements under which the needle must stay in view. The tissue
+#: clearance takes all of them (a stab is a failed run); a needle that is out of view is only
+#: a refusal, and the next presentation is tried.
+VIEW_SHARE = 0.5
+#: Jaw-axis directions in the camera frame (x toward the arm's own side is s = +1; +y points
+#: down the image, so (0, 1, 1) holds the needle plane nearly level).
 DIRECTIONS = [
     (-1.0, 0.0, 1.0),
     (-0.5, 0.0, 1.0),
@@ -41,24 +61,14 @@ DIRECTIONS = [
     (0.0, -0.5, 1.0),
     (-1.0, -1.0, 1.0),
     (-0.5, 0.5, 1.0),
+    (0.0, 0.5, 1.0),
+    (0.0, 1.0, 1.0),
+    (-0.5, 1.0, 1.0),
 ]
 ROLLS = np.deg2rad(np.arange(0.0, 360.0, 45.0))
-
-
-def presentation_point(ctx: TaskContext) -> np.ndarray:
-    """World point for the pinch point: in view, ``DEPTH`` away, clear of the tissue."""
-    cam = ctx.camera.model.left.T_world_cam
-    up = ctx.phantom.T_world_phantom[:3, 2]
-    ports = np.array([p.position for p in ctx.phantom.ports()])
-    best, best_clear = None, -np.inf
-    for x, y in OFFSETS:
-        p = (cam @ np.array([x, y, DEPTH, 1.0]))[:3]
-        clear = float(np.min((p - ports) @ up))
-        if clear >= MIN_CLEARANCE:
-            return p
-        if clear > best_clear:
-            best, best_clear = p, clear
-    return best
+#: Samples of the needle's circle (unknown grasp) and of its arc (known grasp).
+CIRCLE_SAMPLES = 16
+ARC_SAMPLES = 9
 
 
 def _side(ctx: TaskContext, arm: ArmHandle) -> float:
@@ -67,16 +77,88 @@ def _side(ctx: TaskContext, arm: ArmHandle) -> float:
     return 1.0 if (cam.T_cam_world @ np.r_[arm.base_frame()[:3, 3], 1.0])[0] >= 0 else -1.0
 
 
-def candidate_poses(ctx: TaskContext, arm: ArmHandle) -> list[np.ndarray]:
-    """Tip poses that present a held needle, reachable at their goal, least wrist bend first."""
-    cam_R = ctx.camera.model.left.T_world_cam[:3, :3]
-    point = presentation_point(ctx)
-    s = _side(ctx, arm)
-    base = arm.base_frame()
-    q_now = arm.servo.setpoint_jp()
+def presentation_points(ctx: TaskContext, side: float = 1.0) -> list[np.ndarray]:
+    """World points for the pinch point, in order of preference: nearest the image centre and
+    ``DEPTH`` first, the arm's own side before the other at equal distance."""
+    cam = ctx.camera.model.left.T_world_cam
+    grid = [(d, x, y) for d in DEPTHS for x in X_OFFSETS for y in Y_OFFSETS]
+    grid.sort(key=lambda g: (np.hypot(g[1], g[2]) + 2.0 * abs(g[0] - DEPTH), -g[1]))
+    return [(cam @ np.array([side * x, y, d, 1.0]))[:3] for d, x, y in grid]
+
+
+def presentation_point(ctx: TaskContext) -> np.ndarray:
+    """The most preferred pinch point (the image centre at ``DEPTH``)."""
+    return presentation_points(ctx)[0]
+
+
+def needle_places(ctx: TaskContext, arm: ArmHandle, T_tip: np.ndarray) -> np.ndarray:
+    """World points where the held needle may be with the jaw at ``T_tip`` (before any offset
+    displacement): its believed arc, or, unknown, the pinch point and the whole circle on
+    either side of the jaw (the jaw holds the wire along tip x, the centre lies one radius
+    along ±tip y)."""
     b = ctx.belief
-    unknown = b is None or b.holder != arm.name or b.T_tip_needle is None
-    scored = []
+    r = ctx.needle.radius
+    if b is not None and b.holder == arm.name and b.T_tip_needle is not None:
+        T_needle = T_tip @ b.T_tip_needle
+        arc = ctx.needle.point_at(
+            np.linspace(ctx.needle.tip_angle, ctx.needle.base_angle, ARC_SAMPLES)
+        )
+        return arc @ T_needle[:3, :3].T + T_needle[:3, 3]
+    pinch = T_tip[:3, 3] - GRASP_DEPTH * T_tip[:3, 2]
+    a = np.linspace(0.0, 2 * np.pi, CIRCLE_SAMPLES, endpoint=False)
+    ring = r * (np.cos(a)[:, None] * T_tip[:3, 0] + np.sin(a)[:, None] * T_tip[:3, 1])
+    pts = [pinch[None]]
+    for s in (1.0, -1.0):
+        pts.append(pinch + s * r * T_tip[:3, 1] + ring)
+    return np.vstack(pts)
+
+
+def _displacements(arm: ArmHandle, q: np.ndarray | None) -> np.ndarray:
+    """World tip displacements the offset bound allows at joints ``q`` (zero if calibrated)."""
+    if arm.calibrated or q is None:
+        return np.zeros((1, 3))
+    return offset_displacements(q, levels=2) @ arm.base_frame()[:3, :3].T
+
+
+def clearance_at(
+    ctx: TaskContext, arm: ArmHandle, T_tip: np.ndarray, displacements: np.ndarray
+) -> float:
+    """Least height (m) of the held needle above the tissue over its possible places."""
+    pts = needle_places(ctx, arm, T_tip)
+    moved = (pts[:, None, :] + displacements[None]).reshape(-1, 3)
+    return float(np.min(height_above_tissue(ctx.phantom, moved)))
+
+
+def needle_clearance(ctx: TaskContext, arm: ArmHandle, T_tip: np.ndarray) -> float:
+    """Least height (m) of the held needle above the tissue with the jaw at ``T_tip``, over its
+    possible places and the tip displacements an uncalibrated arm may have there."""
+    q = _ik(arm, T_tip, arm.servo.setpoint_jp())
+    return clearance_at(ctx, arm, T_tip, _displacements(arm, q))
+
+
+def in_view(ctx: TaskContext, points_world: np.ndarray) -> bool:
+    """Whether every point projects inside both images with ``VIEW_MARGIN_PX`` to spare."""
+    for cam in (ctx.camera.model.left, ctx.camera.model.right):
+        if np.any(cam.to_camera(points_world)[:, 2] <= 0):
+            return False
+        uv = cam.project(points_world)
+        m = VIEW_MARGIN_PX
+        if np.any(uv < m) or np.any(uv[:, 0] > cam.width - m) or np.any(uv[:, 1] > cam.height - m):
+            return False
+    return True
+
+
+def _ik(arm: ArmHandle, T_world_tip: np.ndarray, q_near: np.ndarray) -> np.ndarray | None:
+    try:
+        return inverse_kinematics(to_base(T_world_tip, arm.base_frame()), q_near)
+    except UnreachablePoseError:
+        return None
+
+
+def _orientations(ctx: TaskContext, s: float) -> list[np.ndarray]:
+    """Jaw frames (rotation only): each direction, turned about its axis by each roll."""
+    cam_R = ctx.camera.model.left.T_world_cam[:3, :3]
+    frames = []
     for d in DIRECTIONS:
         z = cam_R @ (np.array([s * d[0], d[1], d[2]]) / np.linalg.norm(d))
         a = np.cross(z, cam_R[:, 1])
@@ -84,50 +166,73 @@ def candidate_poses(ctx: TaskContext, arm: ArmHandle) -> list[np.ndarray]:
         b = np.cross(z, a)
         for roll in ROLLS:
             x = np.cos(roll) * a + np.sin(roll) * b
-            T = make_transform(np.column_stack([x, np.cross(z, x), z]), point + GRASP_DEPTH * z)
-            try:
-                q = inverse_kinematics(to_base(T, base), q_now)
-            except UnreachablePoseError:
+            frames.append(np.column_stack([x, np.cross(z, x), z]))
+    return frames
+
+
+def iter_candidates(
+    ctx: TaskContext, arm: ArmHandle, toward: ArmHandle | None = None
+) -> Iterator[np.ndarray]:
+    """Reachable presentation tip poses: safe and in view under ``VIEW_SHARE`` of the offset
+    displacements first (point order, then least wrist bend); then safe ones in view as
+    planned; then the others, highest first. Points on ``toward``'s side of the image (default:
+    the arm's own) come first at equal distance from the centre."""
+    s = _side(ctx, arm)
+    q_now = arm.servo.setpoint_jp()
+    frames = _orientations(ctx, s)
+    later: list[tuple[int, float, np.ndarray]] = []  # (tier, -clearance, pose)
+    for point in presentation_points(ctx, _side(ctx, toward or arm)):
+        shaft = None  # joints near this point: the offset displacements there
+        best = []
+        for R in frames:
+            T = make_transform(R, point + GRASP_DEPTH * R[:, 2])
+            if shaft is None:
+                shaft = _ik(arm, T, q_now)
+                if shaft is None:
+                    continue
+                d_shaft = _displacements(arm, shaft)
+                if np.min(height_above_tissue(ctx.phantom, point + d_shaft)) < MIN_NEEDLE_CLEARANCE:
+                    break  # not even the jaw clears the tissue here, however it is turned
+            places = needle_places(ctx, arm, T)
+            if not in_view(ctx, places):
                 continue
-            bend = abs(q[4]) + abs(q[5]) + 0.3 * abs(q[3] - q_now[3])
-            low, band = False, 0.0
-            if unknown:  # among those that may hang low: higher first, by 5 mm bands
-                clear = needle_clearance(ctx, arm, T)
-                low = clear < MIN_NEEDLE_CLEARANCE
-                band = -np.floor(clear / 0.005) if low else 0.0
-            scored.append((low, band, bend, len(scored), T))
-    # A needle not localised yet: poses that may hang it into the tissue go last, however
-    # little they bend (once its in-hand pose is known, least bend decides, as the views of
-    # the handovers were chosen for).
-    scored.sort(key=lambda c: c[:4])
-    return [T for *_, T in scored]
+            clear = clearance_at(ctx, arm, T, d_shaft)
+            if clear < MIN_NEEDLE_CLEARANCE:
+                later.append((2, -clear, T))
+                continue
+            q = _ik(arm, T, q_now)
+            if q is None:
+                continue
+            d = _displacements(arm, q)
+            if clearance_at(ctx, arm, T, d) < MIN_NEEDLE_CLEARANCE:
+                later.append((2, -clear, T))
+            elif not in_view(ctx, (places[:, None, :] + VIEW_SHARE * d).reshape(-1, 3)):
+                later.append((1, -clear, T))
+            else:
+                best.append((abs(q[4]) + abs(q[5]) + 0.3 * abs(q[3] - q_now[3]), len(best), T))
+        for *_, T in sorted(best, key=lambda c: c[:2]):
+            yield T
+    later.sort(key=lambda c: c[:2])
+    for *_, T in later:
+        if _ik(arm, T, q_now) is not None:
+            yield T
 
 
-def needle_clearance(ctx: TaskContext, arm: ArmHandle, T_tip: np.ndarray) -> float:
-    """Height (m) of the held needle's lowest point above the highest port, with the jaw at
-    ``T_tip`` (less the tip margin of an uncalibrated arm). Known in-hand transform: its arc;
-    unknown: the worst of both hands — the jaw holds the wire along tip x, so the arc's centre
-    lies one radius along ±tip y and the needle may reach a radius below that."""
-    up = ctx.phantom.T_world_phantom[:3, 2]
-    top = max(float(p.position @ up) for p in ctx.phantom.ports())
-    b = ctx.belief
-    r = ctx.needle.radius
-    if b is not None and b.holder == arm.name and b.T_tip_needle is not None:
-        T_needle = T_tip @ b.T_tip_needle
-        arc = ctx.needle.point_at(np.linspace(ctx.needle.tip_angle, ctx.needle.base_angle, 9))
-        lowest = float(np.min((arc @ T_needle[:3, :3].T + T_needle[:3, 3]) @ up))
-    else:
-        lowest = float(T_tip[:3, 3] @ up) - r * abs(float(T_tip[:3, 1] @ up)) - r
-    return lowest - top - tip_margin(arm)
+def candidate_poses(ctx: TaskContext, arm: ArmHandle, limit: int = 24) -> list[np.ndarray]:
+    """The first ``limit`` presentation poses of :func:`iter_candidates`."""
+    return list(islice(iter_candidates(ctx, arm), limit))
 
 
 def choose(
-    ctx: TaskContext, arm: ArmHandle, accept: Callable[[np.ndarray], str] | None = None
+    ctx: TaskContext,
+    arm: ArmHandle,
+    accept: Callable[[np.ndarray], str] | None = None,
+    toward: ArmHandle | None = None,
 ) -> tuple[list[np.ndarray], list[str]]:
     """Candidate poses the arm can move to now (and that ``accept`` passes: '' = ok), in order,
-    plus the reasons the others were dropped."""
+    plus the reasons the others were dropped (``toward``: see :func:`iter_candidates`)."""
     good, why = [], []
-    for T in candidate_poses(ctx, arm):
+    for T in iter_candidates(ctx, arm, toward):
         reason = feasible(arm, [T]) or (accept(T) if accept else "")
         if reason:
             why.append(reason)
@@ -164,4 +269,3 @@ def lifted_first(ctx: TaskContext, arm: ArmHandle, T_goal: np.ndarray) -> list[n
         if not feasible(arm, [T_up]):
             return [T_up, T_goal]
     return [T_goal]
-

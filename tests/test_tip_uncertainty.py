@@ -33,3 +33,13 @@ def test_the_margin_is_zero_once_calibrated(calibrated):
     arm = SimpleNamespace(calibrated=calibrated, servo=SimpleNamespace(estimated_jp=lambda: Q))
     margin = tip_margin(arm)
     assert (margin == 0.0) if calibrated else margin == worst_offset_displacement(Q)
+
+
+def test_offset_displacements_hold_the_zero_offset_and_reach_the_worst_corner():
+    from suture_bt.skills.tip_uncertainty import offset_displacements
+
+    q = np.array([-0.4, -0.22, 0.139, -1.64, -0.37, -0.11])
+    d = offset_displacements(q, levels=2)
+    assert d.shape == (9, 3)
+    np.testing.assert_allclose(d[0], 0.0)
+    assert np.linalg.norm(d, axis=1).max() == pytest.approx(worst_offset_displacement(q))
