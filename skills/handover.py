@@ -87,8 +87,12 @@ class Handover(Skill):
         self.report["taker_arc_angle_deg"] = float(np.rad2deg(self.arc_angle))
 
         def taker_can_reach(T_giver: np.ndarray) -> str:
+            """'' when the taker reaches the grasp there and the giver can back off after."""
             goal = tip_goal(T_giver @ belief.T_tip_needle, T_hand)
-            return feasible(taker, [backed_off(goal, APPROACH), goal])
+            reason = feasible(taker, [backed_off(goal, APPROACH), goal])
+            if not reason and feasible(giver, [T_giver, backed_off(T_giver, APPROACH)]):
+                reason = f"{self.giver} could not back off from there"
+            return reason
 
         # On the taker's side: it takes the needle without crossing the scene, and keeps it
         # out of the way of what the giver does next.

@@ -29,12 +29,18 @@ from suture_bt.skills.insert import LIFT, PRE_ARC
 from suture_bt.skills.line_of_sight import make_way
 from suture_bt.skills.localize_needle import LocalizeNeedle
 from suture_bt.skills.motion import feasible, move_to, together
-from suture_bt.transforms import invert
+from suture_bt.transforms import invert, rotation_angle
 
 #: A calibrated arm whose held wire is seen this far from its pinch point, and the needle this
 #: far from the prediction, has drifted (m): a slip turns and slides the needle in the jaw but
 #: keeps the wire between the blades. (No-fault checks: 0.3-0.6 mm from the prediction.)
 DRIFT_JAW, DRIFT_POSITION = 0.0012, 0.0015
+#: A slip turns the needle about an axis through the held point (the jaw's closing axis, on
+#: which the needle's centre lies, or the jaw's own axis) or slides it along its circle about
+#: its centre: it moves the centre by at most a radius times the turn. A needle moved with
+#: less than this share of that turn moved with the jaw: a drift, wherever along the wire it
+#: went (a move along the wire leaves the wire between the blades).
+DRIFT_TURN_SHARE = 0.5
 #: A second view is taken this far above the first (m), before the needle is presented (a
 #: drifted arm, still believed calibrated, presented it 1.7-2.5 mm into the ridge); a drifted
 #: arm rises as far before the handover that empties its jaw (else 1.3 mm into the flank).
@@ -81,7 +87,12 @@ class CheckInHand(Skill):
         jaw = self._jaw_distance(arm, seen.T_world_needle)
         dp = float(np.linalg.norm(seen.T_world_needle[:3, 3] - predicted[:3, 3]))
         self.report.update(jaw_distance_mm=1e3 * jaw, off_prediction_mm=1e3 * dp)
-        if arm.calibrated and jaw > DRIFT_JAW and dp > DRIFT_POSITION:
+        turn = rotation_angle(seen.T_world_needle[:3, :3], predicted[:3, :3])
+        if (
+            arm.calibrated
+            and dp > DRIFT_POSITION
+            and (jaw > DRIFT_JAW or turn < DRIFT_TURN_SHARE * dp / ctx.needle.radius)
+        ):
             where_seen = f"wire {1e3 * jaw:.1f} mm from its pinch point, {detail}"
             yield from self._rise()
             self._drifted(arm, kept, where_seen)

@@ -49,6 +49,15 @@ AT_END_M, AT_END_DEG = 0.003, 10.0
 LOOK_AGAIN_AFTER = 0.1
 
 
+def approach_path(ctx: TaskContext, arm, lift: np.ndarray) -> list[np.ndarray]:
+    """Waypoints to an entry's lift pose: turned to its orientation ``TURN_HEIGHT`` above it
+    first, then down (a joint move straight from a presentation swings the needle low over the
+    ridge); straight there when the high pose is out of reach."""
+    high = lift.copy()
+    high[:3, 3] += TURN_HEIGHT * ctx.phantom.T_world_phantom[:3, 2]
+    return [lift] if feasible(arm, [high, lift]) else [high, lift]  # feasible: "" = reachable
+
+
 class Insert(Skill):
     """``arm`` (holding the needle) drives it through pair ``pair`` (1-based)."""
 
@@ -90,11 +99,7 @@ class Insert(Skill):
         self.report["T_tip_needle"] = np.asarray(T_gn, dtype=float).tolist()  # sweep's grasp
         T_inv = np.linalg.inv(T_gn)
         lift, pre = (T @ T_inv for T in arc.approach_poses(PRE_ARC, LIFT))
-        # Turned to the approach's orientation high above it first, then down: a joint move
-        # straight from a presentation would swing the needle low over the ridge.
-        high = lift.copy()
-        high[:3, 3] += TURN_HEIGHT * ctx.phantom.T_world_phantom[:3, 2]
-        path = [lift] if feasible(arm, [high, lift]) else [high, lift]  # "" = feasible
+        path = approach_path(ctx, arm, lift)
         self.say(f"{where}: approaching {entry.name}")
         try:
             yield from move_to(ctx.clock, arm, path, "approach the entry")

@@ -43,6 +43,10 @@ Y_OFFSETS = tuple(-0.004 * k for k in range(8))
 #: Smallest height of the pinch point above every port for the lift on the way
 #: (:func:`lifted_first`, m).
 MIN_CLEARANCE = 0.02
+#: Smallest height (m) of the pinch point above the tissue under it as planned (with every
+#: offset displacement: ``MIN_NEEDLE_CLEARANCE``): turning between presentations swings the
+#: needle about it.
+MIN_PINCH_CLEARANCE = 0.02
 #: Smallest height (m) of every place the held needle may be above the tissue under it.
 MIN_NEEDLE_CLEARANCE = 0.008
 #: Pixels the needle's possible extent keeps from the image border, in both eyes.
@@ -191,8 +195,9 @@ def iter_candidates(
                 if shaft is None:
                     continue
                 d_shaft = _displacements(arm, shaft)
-                if np.min(height_above_tissue(ctx.phantom, point + d_shaft)) < MIN_NEEDLE_CLEARANCE:
-                    break  # not even the jaw clears the tissue here, however it is turned
+                jaw = height_above_tissue(ctx.phantom, point + d_shaft)
+                if jaw[0] < MIN_PINCH_CLEARANCE or np.min(jaw) < MIN_NEEDLE_CLEARANCE:
+                    break  # the jaw too low here, however it is turned
             places = needle_places(ctx, arm, T)
             if not in_view(ctx, places):
                 continue
