@@ -168,7 +168,7 @@ def test_the_uncalibrated_presentations_go_higher_than_the_calibrated_ones():
 
 
 def test_a_presentation_that_may_put_the_needle_into_the_tissue_goes_last():
-    ctx = make_ctx(make_transform(None, (0.0, 0.0, 0.015)))  # the phantom X mm higher
+    ctx = make_ctx(make_transform(None, (0.0, 0.0, 0.01)))  # the phantom 10 mm higher
     arm = make_arm("psm2")
     arm.calibrated = True
     clear = [needle_clearance(ctx, arm, T) for T in candidate_poses(ctx, arm, limit=2000)]
