@@ -7,13 +7,16 @@ one of a grid of points in view (about ``DEPTH`` in front of the left camera, ne
 centre first) and turns the jaw (whose axis is the needle plane's normal) from a small set of
 directions toward the line of sight.
 
-A pose is safe when every place the held needle may be stays ``MIN_NEEDLE_CLEARANCE`` above
-the known tissue surface under it (the flat top and the ridge of the ports,
-:mod:`suture_bt.geometry.tissue_surface`): the needle's arc as believed, or, not localised yet,
-the whole circle on either side of the jaw; each moved by every tip displacement the task's
-offset bound allows an uncalibrated arm. Safe poses come first (nearest point, then least
-wrist bend); the others only after, highest first. Everything is derived from the camera model,
-the port frames and the arm's joints, so a moved, rotated or tilted phantom works the same.
+A pose is safe when its pinch point stands ``MIN_PINCH_CLEARANCE`` above the known tissue
+surface under it (the flat top and the ridge of the ports,
+:mod:`suture_bt.geometry.tissue_surface`) and every place the held needle may be stays
+``MIN_NEEDLE_CLEARANCE`` above it: the needle's arc as believed, or, not localised yet, the
+whole circle on either side of the jaw; each moved by every tip displacement the task's offset
+bound allows an uncalibrated arm (at the Task 3 start up to about 20 mm: such an arm presents
+higher and beside the ridge). Safe poses that keep the needle in view under half those
+displacements come first (nearest point, then least wrist bend), then other safe ones, then the
+rest, highest first. Everything is derived from the camera model, the port frames and the arm's
+joints, so a moved, rotated or tilted phantom works the same.
 """
 
 from __future__ import annotations
