@@ -25,7 +25,7 @@ from suture_bt.skills import checks
 from suture_bt.skills.base import Skill, SkillFailure, Waiting
 from suture_bt.skills.context import TaskContext
 from suture_bt.skills.grasps import held_arc_angle
-from suture_bt.skills.insert import LIFT, PRE_ARC
+from suture_bt.skills.insert import LIFT, PRE_ARC, approach_path
 from suture_bt.skills.line_of_sight import make_way
 from suture_bt.skills.localize_needle import LocalizeNeedle
 from suture_bt.skills.motion import feasible, move_to, together
@@ -67,7 +67,7 @@ class CheckInHand(Skill):
         lift = arc.approach_poses(PRE_ARC, LIFT)[0] @ invert(T_gn)
         self.say(f"{where}: bringing the needle over {entry.name} to look at it")
         try:
-            approach = move_to(ctx.clock, arm, [lift], "approach the entry")
+            approach = move_to(ctx.clock, arm, approach_path(ctx, arm, lift), "approach the entry")
             yield from together(approach, *make_way(ctx, (lift @ T_gn)[:3, 3], self.arm_name))
         except SkillFailure as e:
             raise SkillFailure(
