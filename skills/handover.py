@@ -89,7 +89,9 @@ class Handover(Skill):
         def taker_can_reach(T_giver: np.ndarray) -> str:
             """'' when the taker reaches the grasp there and the giver can back off after."""
             goal = tip_goal(T_giver @ belief.T_tip_needle, T_hand)
-            reason = feasible(taker, [backed_off(goal, APPROACH), goal])
+            # The approach along the jaws as the move will take it (IK from pose to pose).
+            path = [backed_off(goal, f * APPROACH) for f in (1.0, 0.75, 0.5, 0.25, 0.0)]
+            reason = feasible(taker, path)
             if not reason and feasible(giver, [T_giver, backed_off(T_giver, APPROACH)]):
                 reason = f"{self.giver} could not back off from there"
             return reason

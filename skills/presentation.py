@@ -73,6 +73,8 @@ DIRECTIONS = [
     (-0.5, 1.0, 1.0),
 ]
 ROLLS = np.deg2rad(np.arange(0.0, 360.0, 45.0))
+#: Presentation points whose poses are taken in turn (a refusal moves to the next point).
+SPREAD_POINTS = 3
 #: Samples of the needle's circle (unknown grasp) and of its arc (known grasp).
 CIRCLE_SAMPLES = 16
 ARC_SAMPLES = 9
@@ -177,20 +179,19 @@ def _orientations(ctx: TaskContext, s: float) -> list[np.ndarray]:
     return frames
 
 
-def iter_candidates(
-    ctx: TaskContext, arm: ArmHandle, toward: ArmHandle | None = None
-) -> Iterator[np.ndarray]:
-    """Reachable presentation tip poses: safe and in view under ``VIEW_SHARE`` of the offset
-    displacements first (point order, then least wrist bend); then safe ones in view as
-    planned; then the others, highest first. Points on ``toward``'s side of the image (default:
-    the arm's own) come first at equal distance from the centre."""
+def _safe_by_point(
+    ctx: TaskContext, arm: ArmHandle, toward: ArmHandle | None, later: list
+) -> Iterator[tuple[bool, list[np.ndarray]]]:
+    """Per presentation point in order: whether a safe pose there keeps the needle in view
+    under ``VIEW_SHARE`` of the offset displacements, and its safe poses (those first, then
+    those in view only as planned; each least wrist bend first). Poses that are not safe go
+    to ``later`` as (-clearance, pose)."""
     s = _side(ctx, arm)
     q_now = arm.servo.setpoint_jp()
     frames = _orientations(ctx, s)
-    later: list[tuple[int, float, np.ndarray]] = []  # (tier, -clearance, pose)
     for point in presentation_points(ctx, _side(ctx, toward or arm)):
         shaft = None  # joints near this point: the offset displacements there
-        best = []
+        best, seen_as_planned = [], []
         for R in frames:
             T = make_transform(R, point + GRASP_DEPTH * R[:, 2])
             if shaft is None:
@@ -206,22 +207,54 @@ def iter_candidates(
                 continue
             clear = clearance_at(ctx, arm, T, d_shaft)
             if clear < MIN_NEEDLE_CLEARANCE:
-                later.append((2, -clear, T))
+                later.append((-clear, T))
                 continue
             q = _ik(arm, T, q_now)
             if q is None:
                 continue
             d = _displacements(arm, q)
+            bend = (abs(q[4]) + abs(q[5]) + 0.3 * abs(q[3] - q_now[3]), len(best), T)
             if clearance_at(ctx, arm, T, d) < MIN_NEEDLE_CLEARANCE:
-                later.append((2, -clear, T))
+                later.append((-clear, T))
             elif not in_view(ctx, (places[:, None, :] + VIEW_SHARE * d).reshape(-1, 3)):
-                later.append((1, -clear, T))
+                seen_as_planned.append(bend)
             else:
-                best.append((abs(q[4]) + abs(q[5]) + 0.3 * abs(q[3] - q_now[3]), len(best), T))
-        for *_, T in sorted(best, key=lambda c: c[:2]):
-            yield T
-    later.sort(key=lambda c: c[:2])
-    for *_, T in later:
+                best.append(bend)
+        yield (
+            bool(best),
+            [T for *_, T in sorted(best, key=lambda c: c[:2])]
+            + [T for *_, T in sorted(seen_as_planned, key=lambda c: c[:2])],
+        )
+
+
+def iter_candidates(
+    ctx: TaskContext, arm: ArmHandle, toward: ArmHandle | None = None
+) -> Iterator[np.ndarray]:
+    """Reachable presentation tip poses. The safe ones (those in view under ``VIEW_SHARE`` of
+    the offset displacements before those in view only as planned, then least wrist bend)
+    taken in turn from the ``SPREAD_POINTS`` nearest points that have any (those with a pose
+    in view under the share first), so that
+    presentations refused in a row differ in place as well as in turn; then those of the
+    further points; then the others, highest first. Points on ``toward``'s side of the image
+    (default: the arm's own) come first at equal distance from the centre."""
+    later: list[tuple[float, np.ndarray]] = []
+    scan = _safe_by_point(ctx, arm, toward, later)
+    groups = []
+    for seen, group in scan:
+        if group:
+            groups.append((not seen, len(groups), group))
+        if len(groups) >= SPREAD_POINTS:
+            break
+    groups = [g for *_, g in sorted(groups, key=lambda g: g[:2])]  # kept in view first
+    for k in range(max((len(g) for g in groups), default=0)):
+        for g in groups:
+            if k < len(g):
+                yield g[k]
+    for _, group in scan:
+        yield from group
+    later.sort(key=lambda c: c[0])
+    q_now = arm.servo.setpoint_jp()
+    for _, T in later:
         if _ik(arm, T, q_now) is not None:
             yield T
 

@@ -164,7 +164,7 @@ def test_the_uncalibrated_presentations_go_higher_than_the_calibrated_ones():
     up = ctx.phantom.T_world_phantom[:3, 2]
     high = pinch(candidate_poses(ctx, uncalibrated, limit=1)[0]) @ up
     low = pinch(candidate_poses(ctx, calibrated, limit=1)[0]) @ up
-    assert high > low + 0.01
+    assert high > low + 0.005  # about 10 mm at the Task 3 start
 
 
 def test_a_presentation_that_may_put_the_needle_into_the_tissue_goes_last():
@@ -250,3 +250,13 @@ def test_an_uncalibrated_arm_rises_further_by_its_worst_offset_displacement():
     assert 0.010 < margin < 0.025  # the SRC bound at the start pose: about 18 mm
     # As high as the arm can go: all of the margin, or a quarter-step short of it.
     assert extra == pytest.approx(margin, abs=1e-9) or 0.0 < extra < margin
+
+
+@pytest.mark.parametrize("calibrated", [False, True])
+def test_presentations_in_a_row_differ_in_place(calibrated):
+    """A refused presentation moves on to another point, not only another turn of the jaw."""
+    ctx = make_ctx()
+    arm = make_arm("psm2")
+    arm.calibrated = calibrated
+    pinches = [pinch(T) for T in candidate_poses(ctx, arm, limit=3)]
+    assert np.linalg.norm(pinches[0] - pinches[1]) > 1e-3
