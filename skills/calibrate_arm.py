@@ -78,6 +78,7 @@ class CalibrateArm(Skill):
             handle.servo.set_offset_estimate(dq)
             self.report["oracle"] = True
         handle.calibrated = True
+        handle.possible_offsets = None  # what earlier looks left is superseded
         handle.offset_estimate = dq.copy()
         self.report["offset_estimate"] = [float(dq[0]), float(dq[1]), float(dq[2])]
         self.say(

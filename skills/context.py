@@ -33,6 +33,9 @@ class ArmHandle:
     calibrated: bool = False
     #: The last calibration's Δq̂ (joints 1-3) and its report, once calibrated.
     offset_estimate: np.ndarray | None = None
+    #: Before calibration: the hidden offsets (N×3) the looks so far leave possible
+    #: (:mod:`~suture_bt.skills.offset_evidence`; None: the task's whole bound).
+    possible_offsets: np.ndarray | None = None
 
     def base_frame(self) -> np.ndarray:
         return self.arm.base_frame()
@@ -62,11 +65,13 @@ class NeedleObservation:
 
 
 class NeedleNotSeen(Exception):
-    """The sensor gave no answer; ``reason`` says why (refusal, needle out of view, ...)."""
+    """The sensor gave no answer; ``reason`` says why (refusal, needle out of view, ...);
+    ``unseen_eye``: an image ("left", "right") in which nothing of a needle was seen."""
 
-    def __init__(self, reason: str):
+    def __init__(self, reason: str, unseen_eye: str | None = None):
         super().__init__(reason)
         self.reason = reason
+        self.unseen_eye = unseen_eye
 
 
 class NeedleSensor(Protocol):

@@ -108,7 +108,10 @@ class Handover(Skill):
             poses = sorted(poses, key=lambda T: self._time_to_next(taker, T, T_hand))
         self.say(f"{self.giver} presents the needle for {self.taker}")
         taker.arm.jaw.move_jp(np.array([JAW_OPEN]))  # opens while the giver presents
-        for T in poses:
+        tried: list[np.ndarray] = []
+        while poses:
+            T = poses.pop(0)
+            tried.append(T)
             present = move_to(
                 ctx.clock, giver, presentation.lifted_first(ctx, giver, T), "present the needle"
             )
@@ -125,10 +128,14 @@ class Handover(Skill):
                 yield from together(present, move_to(ctx.clock, taker, [wait_at], "come closer"))
             else:
                 yield from present
+            look = LocalizeNeedle(ctx, self.giver, present=False)
             try:
-                yield from self.run(LocalizeNeedle(ctx, self.giver, present=False))
+                yield from self.run(look)
             except SkillFailure as e:
                 self.report.setdefault("refusals", []).append(e.reason)
+                if look.narrow_offsets(giver):  # not seen at all: present it elsewhere
+                    fresh, _ = presentation.choose(ctx, giver, taker_can_reach, toward=taker)
+                    poses = [P for P in fresh if min(_gap(P, Q) for Q in tried) > 1e-3]
                 continue
             # Reachability again, now from the fresh estimate (the prediction used to choose
             # the pose carries the giver's in-hand error).
@@ -189,6 +196,11 @@ class Handover(Skill):
             f"{self.taker} holds the needle at "
             f"{np.rad2deg(held_arc_angle(ctx.needle, ctx.belief.T_tip_needle)):.0f}°"
         )
+
+
+def _gap(A: np.ndarray, B: np.ndarray) -> float:
+    """Distance (m) between two poses' tips."""
+    return float(np.linalg.norm(A[:3, 3] - B[:3, 3]))
 
 
 def _as_observation(belief: NeedleBelief, T_world_needle: np.ndarray) -> NeedleObservation:

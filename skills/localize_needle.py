@@ -18,6 +18,7 @@ from suture_bt.skills.base import Skill, SkillFailure, Waiting
 from suture_bt.skills.context import NeedleNotSeen, NeedleObservation, TaskContext
 from suture_bt.skills.line_of_sight import make_way
 from suture_bt.skills.motion import move_to, together
+from suture_bt.skills.offset_evidence import offset_grid, unseen_offsets
 from suture_bt.skills.tip_uncertainty import worst_offset_displacement
 
 #: A held needle's wire must pass this close to the holder's pinch point (m) once the arm is
@@ -26,7 +27,12 @@ from suture_bt.skills.tip_uncertainty import worst_offset_displacement
 HOLD_TOLERANCE_CALIBRATED = 0.002
 HOLD_MARGIN_UNCALIBRATED = 0.004
 #: Presentation poses tried before giving up.
-MAX_PRESENTATIONS = 5
+MAX_PRESENTATIONS = 7
+
+
+def _near_any(T: np.ndarray, tried: list[np.ndarray], tol: float = 1e-3) -> bool:
+    """Whether pose ``T`` puts the tip within ``tol`` of a pose already tried."""
+    return any(np.linalg.norm(T[:3, 3] - P[:3, 3]) < tol for P in tried)
 
 
 class LocalizeNeedle(Skill):
@@ -38,6 +44,7 @@ class LocalizeNeedle(Skill):
         super().__init__(context)
         self.holder = holder
         self.present = present
+        self._unseen_eye: str | None = None
 
     def program(self) -> Waiting:
         ctx = self.context
@@ -54,8 +61,11 @@ class LocalizeNeedle(Skill):
         if not poses:
             raise SkillFailure(f"{arm.name} has no reachable presentation pose ({why[:1]})")
         self.report["presentation_poses"] = [T.tolist() for T in poses]
-        for i, T in enumerate(poses[:MAX_PRESENTATIONS]):
-            self.say(f"presenting the needle held by {arm.name} ({i + 1}/{len(poses)})")
+        tried: list[np.ndarray] = []
+        while poses and len(tried) < MAX_PRESENTATIONS:
+            T = poses.pop(0)
+            tried.append(T)
+            self.say(f"presenting the needle held by {arm.name} ({len(tried)}/{MAX_PRESENTATIONS})")
             present = move_to(
                 ctx.clock, arm, presentation.lifted_first(ctx, arm, T), "present the needle"
             )
@@ -64,7 +74,24 @@ class LocalizeNeedle(Skill):
             if obs is not None:
                 self._adopt(obs)
                 return
+            if self.narrow_offsets(arm):
+                fresh, _ = presentation.choose(ctx, arm)
+                poses = [P for P in fresh if not _near_any(P, tried)]
         raise SkillFailure(f"needle held by {arm.name} not localised: {'; '.join(reasons)}")
+
+    def narrow_offsets(self, arm) -> bool:
+        """After a look in which one eye saw nothing of the needle held by an uncalibrated
+        ``arm``: rule out the offsets that would have shown it (kept in the arm's handle for
+        the next presentations). True when some were ruled out and some are left."""
+        if self._unseen_eye is None or arm.calibrated:
+            return False
+        before = offset_grid() if arm.possible_offsets is None else arm.possible_offsets
+        left = unseen_offsets(self.context, arm, arm.servo.estimated_jp(), self._unseen_eye, before)
+        if len(left) == 0 or len(left) == len(before):
+            return False  # a contradiction (the network missed it) or nothing learnt
+        arm.possible_offsets = left
+        self.report.setdefault("offsets_left", []).append(len(left))
+        return True
 
     def _target(self, T_present: np.ndarray) -> np.ndarray:
         """Where the needle will be seen: its centre at this presentation (or the pinch)."""
@@ -76,9 +103,11 @@ class LocalizeNeedle(Skill):
     def _look(self, reasons: list[str]) -> NeedleObservation | None:
         ctx = self.context
         previous = ctx.predicted_needle()
+        self._unseen_eye = None
         try:
             obs = ctx.sensor.observe(previous)
         except NeedleNotSeen as e:
+            self._unseen_eye = getattr(e, "unseen_eye", None)
             reasons.append(e.reason)
             self.report.setdefault("refusals", []).append(e.reason)
             return None

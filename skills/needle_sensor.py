@@ -92,7 +92,7 @@ class VisionNeedleSensor:
                 priors=self.priors(previous, prior_checked, holder, holder_tolerance),
             )
         except NeedleNotFound as exc:
-            raise NeedleNotSeen(str(exc)) from exc
+            raise NeedleNotSeen(str(exc), getattr(exc, "unseen_eye", None)) from exc
         finally:
             self.localizer.max_rms_px = strict_rms
         self.last_estimate = est

@@ -32,6 +32,7 @@ from suture_bt.planning import to_base
 from suture_bt.skills.context import ArmHandle, TaskContext
 from suture_bt.skills.grasps import GRASP_DEPTH
 from suture_bt.skills.motion import feasible
+from suture_bt.skills.offset_evidence import displacements
 from suture_bt.skills.tip_uncertainty import offset_displacements, tip_margin
 from suture_bt.transforms import make_transform
 
@@ -41,7 +42,7 @@ DEPTH = 0.062
 DEPTHS = (DEPTH, 0.056, 0.068)
 #: Image-plane offsets of the pinch point (camera frame, m): x toward the arm's own side
 #: (s = +1), y up the image when negative.
-X_OFFSETS = (0.0, 0.008, -0.008, 0.016, -0.016, 0.024)
+X_OFFSETS = (0.0, 0.008, -0.008, 0.016, -0.016, 0.024, 0.032, 0.040, 0.048)
 Y_OFFSETS = tuple(-0.004 * k for k in range(8))
 #: Smallest height of the pinch point above every port for the lift on the way
 #: (:func:`lifted_first`, m).
@@ -73,8 +74,10 @@ DIRECTIONS = [
     (-0.5, 1.0, 1.0),
 ]
 ROLLS = np.deg2rad(np.arange(0.0, 360.0, 45.0))
+#: How many poses :func:`choose` returns (a skill presents them in turn until one answers).
+CHOSEN = 7
 #: Presentation points whose poses are taken in turn (a refusal moves to the next point).
-SPREAD_POINTS = 3
+SPREAD_POINTS = 5
 #: Samples of the needle's circle (unknown grasp) and of its arc (known grasp).
 CIRCLE_SAMPLES = 16
 ARC_SAMPLES = 9
@@ -122,10 +125,16 @@ def needle_places(ctx: TaskContext, arm: ArmHandle, T_tip: np.ndarray) -> np.nda
     return np.vstack(pts)
 
 
-def _displacements(arm: ArmHandle, q: np.ndarray | None) -> np.ndarray:
-    """World tip displacements the offset bound allows at joints ``q`` (zero if calibrated)."""
+def _displacements(
+    arm: ArmHandle, q: np.ndarray | None, offsets: np.ndarray | None = None
+) -> np.ndarray:
+    """World tip displacements at joints ``q`` (zero if calibrated): of the offset bound's
+    corners, or of ``offsets`` (those a refused look left, :mod:`offset_evidence`)."""
     if arm.calibrated or q is None:
         return np.zeros((1, 3))
+    offsets = offsets if offsets is not None else getattr(arm, "possible_offsets", None)
+    if offsets is not None:
+        return displacements(arm, q, offsets)
     return offset_displacements(q, levels=2) @ arm.base_frame()[:3, :3].T
 
 
@@ -180,7 +189,11 @@ def _orientations(ctx: TaskContext, s: float) -> list[np.ndarray]:
 
 
 def _safe_by_point(
-    ctx: TaskContext, arm: ArmHandle, toward: ArmHandle | None, later: list
+    ctx: TaskContext,
+    arm: ArmHandle,
+    toward: ArmHandle | None,
+    later: list,
+    offsets: np.ndarray | None = None,
 ) -> Iterator[tuple[bool, list[np.ndarray]]]:
     """Per presentation point in order: whether a safe pose there keeps the needle in view
     under ``VIEW_SHARE`` of the offset displacements, and its safe poses (those first, then
@@ -198,7 +211,7 @@ def _safe_by_point(
                 shaft = _ik(arm, T, q_now)
                 if shaft is None:
                     continue
-                d_shaft = _displacements(arm, shaft)
+                d_shaft = _displacements(arm, shaft, offsets)
                 jaw = height_above_tissue(ctx.phantom, point + d_shaft)
                 if jaw[0] < MIN_PINCH_CLEARANCE or np.min(jaw) < MIN_NEEDLE_CLEARANCE:
                     break  # the jaw too low here, however it is turned
@@ -212,7 +225,8 @@ def _safe_by_point(
             q = _ik(arm, T, q_now)
             if q is None:
                 continue
-            d = _displacements(arm, q)
+            narrowed = offsets is not None or getattr(arm, "possible_offsets", None) is not None
+            d = d_shaft if narrowed else _displacements(arm, q)
             bend = (abs(q[4]) + abs(q[5]) + 0.3 * abs(q[3] - q_now[3]), len(best), T)
             if clearance_at(ctx, arm, T, d) < MIN_NEEDLE_CLEARANCE:
                 later.append((-clear, T))
@@ -228,7 +242,10 @@ def _safe_by_point(
 
 
 def iter_candidates(
-    ctx: TaskContext, arm: ArmHandle, toward: ArmHandle | None = None
+    ctx: TaskContext,
+    arm: ArmHandle,
+    toward: ArmHandle | None = None,
+    offsets: np.ndarray | None = None,
 ) -> Iterator[np.ndarray]:
     """Reachable presentation tip poses. The safe ones (those in view under ``VIEW_SHARE`` of
     the offset displacements before those in view only as planned, then least wrist bend)
@@ -236,9 +253,10 @@ def iter_candidates(
     in view under the share first), so that
     presentations refused in a row differ in place as well as in turn; then those of the
     further points; then the others, highest first. Points on ``toward``'s side of the image
-    (default: the arm's own) come first at equal distance from the centre."""
+    (default: the arm's own) come first at equal distance from the centre. ``offsets``: the
+    offsets an uncalibrated arm may still have (None: the whole bound)."""
     later: list[tuple[float, np.ndarray]] = []
-    scan = _safe_by_point(ctx, arm, toward, later)
+    scan = _safe_by_point(ctx, arm, toward, later, offsets)
     groups = []
     for seen, group in scan:
         if group:
@@ -269,17 +287,18 @@ def choose(
     arm: ArmHandle,
     accept: Callable[[np.ndarray], str] | None = None,
     toward: ArmHandle | None = None,
+    offsets: np.ndarray | None = None,
 ) -> tuple[list[np.ndarray], list[str]]:
     """Candidate poses the arm can move to now (and that ``accept`` passes: '' = ok), in order,
     plus the reasons the others were dropped (``toward``: see :func:`iter_candidates`)."""
     good, why = [], []
-    for T in iter_candidates(ctx, arm, toward):
+    for T in iter_candidates(ctx, arm, toward, offsets):
         reason = feasible(arm, [T]) or (accept(T) if accept else "")
         if reason:
             why.append(reason)
         else:
             good.append(T)
-        if len(good) >= 5:
+        if len(good) >= CHOSEN:
             break
     return good, why
 

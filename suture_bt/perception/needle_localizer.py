@@ -439,7 +439,9 @@ class NeedleLocalizer:
                 prob[eye][:h], self.coarse_threshold, max_gap=max_gap, anchors=anchors[eye]
             )
             if coarse.sum() == 0:
-                raise NeedleNotFound(f"the network sees no needle in the {name} image")
+                raise NeedleNotFound(
+                    f"the network sees no needle in the {name} image", unseen_eye=name
+                )
             raw.append(refine_mask(img, coarse, scale, self.rule))
         fb = self.stereo.left.fx * self.stereo.baseline
         disp = mask_disparity(raw[0], raw[1], fb / MAX_DEPTH, fb / MIN_DEPTH)

@@ -4,8 +4,10 @@ from __future__ import annotations
 
 
 class NeedleNotFound(Exception):
-    """The needle is not visible enough to estimate its pose; ``reason`` says why."""
+    """The needle is not visible enough to estimate its pose; ``reason`` says why.
+    ``unseen_eye`` names an image in which nothing of a needle was seen ("left", "right")."""
 
-    def __init__(self, reason: str) -> None:
+    def __init__(self, reason: str, unseen_eye: str | None = None) -> None:
         super().__init__(reason)
         self.reason = reason
+        self.unseen_eye = unseen_eye
