@@ -88,7 +88,7 @@ class Handover(Skill):
 
         def taker_can_reach(T_giver: np.ndarray) -> str:
             """'' when the taker reaches the grasp there and the giver can back off after."""
-            goal = tip_goal(T_giver @ belief.T_tip_needle, T_hand)
+            goal = tip_goal(T_giver @ ctx.belief.T_tip_needle, T_hand)  # the latest estimate
             # The approach along the jaws as the move will take it (IK from pose to pose).
             path = [backed_off(goal, f * APPROACH) for f in (1.0, 0.75, 0.5, 0.25, 0.0)]
             reason = feasible(taker, path)
@@ -109,14 +109,14 @@ class Handover(Skill):
         self.say(f"{self.giver} presents the needle for {self.taker}")
         taker.arm.jaw.move_jp(np.array([JAW_OPEN]))  # opens while the giver presents
         tried: list[np.ndarray] = []
-        while poses:
+        while poses and len(tried) < presentation.CHOSEN:
             T = poses.pop(0)
             tried.append(T)
             present = move_to(
                 ctx.clock, giver, presentation.lifted_first(ctx, giver, T), "present the needle"
             )
             # The taker waits a little back along its jaws, out of the cameras' sight.
-            T_needle_there = T @ belief.T_tip_needle
+            T_needle_there = T @ ctx.belief.T_tip_needle
             rcm, centre = taker.base_frame()[:3, 3], T_needle_there[:3, 3]
             wait_at = backed_off(tip_goal(T_needle_there, T_hand), STANDBY)
             cleared = clear_tip_pose(ctx, wait_at, rcm, centre)
@@ -145,6 +145,9 @@ class Handover(Skill):
             if not reason:
                 break
             self.report.setdefault("refusals", []).append(f"{self.taker} cannot reach: {reason}")
+            # The fresh estimate is the giver's in-hand pose from here on: choose again with it.
+            fresh, _ = presentation.choose(ctx, giver, taker_can_reach, toward=taker)
+            poses = [P for P in fresh if min(_gap(P, Q) for Q in tried) > 1e-3]
         else:
             raise SkillFailure(
                 f"hand over: no presentation of the needle in {self.giver}'s jaw that "
