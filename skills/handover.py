@@ -96,6 +96,9 @@ class Handover(Skill):
                 reason = f"{self.giver} could not back off from there"
             return reason
 
+        def choose_again() -> list[np.ndarray]:
+            return presentation.choose(ctx, giver, taker_can_reach, toward=taker)[0]
+
         # On the taker's side: it takes the needle without crossing the scene, and keeps it
         # out of the way of what the giver does next.
         poses, why = presentation.choose(ctx, giver, taker_can_reach, toward=taker)
@@ -134,8 +137,7 @@ class Handover(Skill):
             except SkillFailure as e:
                 self.report.setdefault("refusals", []).append(e.reason)
                 if look.narrow_offsets(giver):  # not seen at all: present it elsewhere
-                    fresh, _ = presentation.choose(ctx, giver, taker_can_reach, toward=taker)
-                    poses = [P for P in fresh if min(_gap(P, Q) for Q in tried) > 1e-3]
+                    poses = presentation.untried(choose_again(), tried)
                 continue
             # Reachability again, now from the fresh estimate (the prediction used to choose
             # the pose carries the giver's in-hand error).
@@ -146,8 +148,7 @@ class Handover(Skill):
                 break
             self.report.setdefault("refusals", []).append(f"{self.taker} cannot reach: {reason}")
             # The fresh estimate is the giver's in-hand pose from here on: choose again with it.
-            fresh, _ = presentation.choose(ctx, giver, taker_can_reach, toward=taker)
-            poses = [P for P in fresh if min(_gap(P, Q) for Q in tried) > 1e-3]
+            poses = presentation.untried(choose_again(), tried)
         else:
             raise SkillFailure(
                 f"hand over: no presentation of the needle in {self.giver}'s jaw that "
@@ -199,11 +200,6 @@ class Handover(Skill):
             f"{self.taker} holds the needle at "
             f"{np.rad2deg(held_arc_angle(ctx.needle, ctx.belief.T_tip_needle)):.0f}°"
         )
-
-
-def _gap(A: np.ndarray, B: np.ndarray) -> float:
-    """Distance (m) between two poses' tips."""
-    return float(np.linalg.norm(A[:3, 3] - B[:3, 3]))
 
 
 def _as_observation(belief: NeedleBelief, T_world_needle: np.ndarray) -> NeedleObservation:

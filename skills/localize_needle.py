@@ -30,11 +30,6 @@ HOLD_MARGIN_UNCALIBRATED = 0.004
 MAX_PRESENTATIONS = 7
 
 
-def _near_any(T: np.ndarray, tried: list[np.ndarray], tol: float = 1e-3) -> bool:
-    """Whether pose ``T`` puts the tip within ``tol`` of a pose already tried."""
-    return any(np.linalg.norm(T[:3, 3] - P[:3, 3]) < tol for P in tried)
-
-
 class LocalizeNeedle(Skill):
     """Localise the needle; ``holder`` names the arm holding it (None: free or resting)."""
 
@@ -75,8 +70,7 @@ class LocalizeNeedle(Skill):
                 self._adopt(obs)
                 return
             if self.narrow_offsets(arm):
-                fresh, _ = presentation.choose(ctx, arm)
-                poses = [P for P in fresh if not _near_any(P, tried)]
+                poses = presentation.untried(presentation.choose(ctx, arm)[0], tried)
         raise SkillFailure(f"needle held by {arm.name} not localised: {'; '.join(reasons)}")
 
     def narrow_offsets(self, arm) -> bool:

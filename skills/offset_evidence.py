@@ -51,15 +51,3 @@ def unseen_offsets(
         r = reach_m * cam.fx / depth + BORDER_PX
         keep[i] = not (r <= u <= cam.width - r and r <= v <= cam.height - r)
     return offsets[keep]
-
-
-def displacements(arm: ArmHandle, q: np.ndarray, offsets: np.ndarray) -> np.ndarray:
-    """World tip displacements (K×3) that ``offsets`` cause at joints ``q``."""
-    q = np.asarray(q, dtype=float)
-    tip = forward_kinematics(q)[:3, 3]
-    out = []
-    for dq in offsets:
-        q2 = q.copy()
-        q2[:3] += dq
-        out.append(forward_kinematics(q2)[:3, 3] - tip)
-    return np.array(out) @ arm.base_frame()[:3, :3].T

@@ -32,8 +32,7 @@ from suture_bt.planning import to_base
 from suture_bt.skills.context import ArmHandle, TaskContext
 from suture_bt.skills.grasps import GRASP_DEPTH
 from suture_bt.skills.motion import feasible
-from suture_bt.skills.offset_evidence import displacements
-from suture_bt.skills.tip_uncertainty import offset_displacements, tip_margin
+from suture_bt.skills.tip_uncertainty import offset_displacements, tip_displacements, tip_margin
 from suture_bt.transforms import make_transform
 
 #: Preferred distance of the pinch point in front of the left camera (m, optical axis).
@@ -128,14 +127,14 @@ def needle_places(ctx: TaskContext, arm: ArmHandle, T_tip: np.ndarray) -> np.nda
 def _displacements(
     arm: ArmHandle, q: np.ndarray | None, offsets: np.ndarray | None = None
 ) -> np.ndarray:
-    """World tip displacements at joints ``q`` (zero if calibrated): of the offset bound's
-    corners, or of ``offsets`` (those a refused look left, :mod:`offset_evidence`)."""
+    """World tip displacements at joints ``q`` (zero if calibrated): of ``offsets``, else of
+    those the arm's looks left (:mod:`offset_evidence`), else of the offset bound's corners."""
+    if offsets is None:
+        offsets = getattr(arm, "possible_offsets", None)  # (a bare arm stub may lack it)
     if arm.calibrated or q is None:
         return np.zeros((1, 3))
-    offsets = offsets if offsets is not None else getattr(arm, "possible_offsets", None)
-    if offsets is not None:
-        return displacements(arm, q, offsets)
-    return offset_displacements(q, levels=2) @ arm.base_frame()[:3, :3].T
+    d = offset_displacements(q, levels=2) if offsets is None else tip_displacements(q, offsets)
+    return d @ arm.base_frame()[:3, :3].T
 
 
 def clearance_at(
@@ -193,7 +192,6 @@ def _safe_by_point(
     arm: ArmHandle,
     toward: ArmHandle | None,
     later: list,
-    offsets: np.ndarray | None = None,
 ) -> Iterator[tuple[bool, list[np.ndarray]]]:
     """Per presentation point in order: whether a safe pose there keeps the needle in view
     under ``VIEW_SHARE`` of the offset displacements, and its safe poses (those first, then
@@ -202,6 +200,7 @@ def _safe_by_point(
     s = _side(ctx, arm)
     q_now = arm.servo.setpoint_jp()
     frames = _orientations(ctx, s)
+    offsets = getattr(arm, "possible_offsets", None)  # what the looks left (None: the bound)
     for point in presentation_points(ctx, _side(ctx, toward or arm)):
         shaft = None  # joints near this point: the offset displacements there
         best, seen_as_planned = [], []
@@ -225,8 +224,8 @@ def _safe_by_point(
             q = _ik(arm, T, q_now)
             if q is None:
                 continue
-            narrowed = offsets is not None or getattr(arm, "possible_offsets", None) is not None
-            d = d_shaft if narrowed else _displacements(arm, q)
+            # The corners again at the pose's own joints; a grid a look left, as at the shaft.
+            d = d_shaft if offsets is not None else _displacements(arm, q)
             bend = (abs(q[4]) + abs(q[5]) + 0.3 * abs(q[3] - q_now[3]), len(best), T)
             if clearance_at(ctx, arm, T, d) < MIN_NEEDLE_CLEARANCE:
                 later.append((-clear, T))
@@ -245,7 +244,6 @@ def iter_candidates(
     ctx: TaskContext,
     arm: ArmHandle,
     toward: ArmHandle | None = None,
-    offsets: np.ndarray | None = None,
 ) -> Iterator[np.ndarray]:
     """Reachable presentation tip poses. The safe ones (those in view under ``VIEW_SHARE`` of
     the offset displacements before those in view only as planned, then least wrist bend)
@@ -253,10 +251,11 @@ def iter_candidates(
     in view under the share first), so that
     presentations refused in a row differ in place as well as in turn; then those of the
     further points; then the others, highest first. Points on ``toward``'s side of the image
-    (default: the arm's own) come first at equal distance from the centre. ``offsets``: the
-    offsets an uncalibrated arm may still have (None: the whole bound)."""
+    (default: the arm's own) come first at equal distance from the centre. An uncalibrated
+    arm's displacements are those of the offsets its looks left (``possible_offsets``), else
+    of the whole bound."""
     later: list[tuple[float, np.ndarray]] = []
-    scan = _safe_by_point(ctx, arm, toward, later, offsets)
+    scan = _safe_by_point(ctx, arm, toward, later)
     groups = []
     for seen, group in scan:
         if group:
@@ -277,6 +276,11 @@ def iter_candidates(
             yield T
 
 
+def untried(poses: list[np.ndarray], tried: list[np.ndarray], tol: float = 1e-3) -> list:
+    """The ``poses`` whose tips are farther than ``tol`` (m) from every pose in ``tried``."""
+    return [P for P in poses if all(np.linalg.norm(P[:3, 3] - Q[:3, 3]) > tol for Q in tried)]
+
+
 def candidate_poses(ctx: TaskContext, arm: ArmHandle, limit: int = 24) -> list[np.ndarray]:
     """The first ``limit`` presentation poses of :func:`iter_candidates`."""
     return list(islice(iter_candidates(ctx, arm), limit))
@@ -287,12 +291,11 @@ def choose(
     arm: ArmHandle,
     accept: Callable[[np.ndarray], str] | None = None,
     toward: ArmHandle | None = None,
-    offsets: np.ndarray | None = None,
 ) -> tuple[list[np.ndarray], list[str]]:
     """Candidate poses the arm can move to now (and that ``accept`` passes: '' = ok), in order,
     plus the reasons the others were dropped (``toward``: see :func:`iter_candidates`)."""
     good, why = [], []
-    for T in iter_candidates(ctx, arm, toward, offsets):
+    for T in iter_candidates(ctx, arm, toward):
         reason = feasible(arm, [T]) or (accept(T) if accept else "")
         if reason:
             why.append(reason)

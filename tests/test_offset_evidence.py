@@ -7,7 +7,7 @@ from test_presentation import CAMERA, make_arm, make_ctx
 from suture_bt.kinematics import forward_kinematics, inverse_kinematics
 from suture_bt.planning import to_base
 from suture_bt.skills.grasps import GRASP_DEPTH
-from suture_bt.skills.offset_evidence import displacements, offset_grid, unseen_offsets
+from suture_bt.skills.offset_evidence import offset_grid, unseen_offsets
 from suture_bt.skills.presentation import candidate_poses
 
 
@@ -34,13 +34,6 @@ def test_an_unseen_needle_at_the_image_centre_rules_out_the_offsets_that_keep_it
     for dq in left:  # every offset kept puts the pinch near the border or outside
         u, v = _pinch_px(ctx, arm, q, dq)
         assert min(u, v, cam.width - u, cam.height - v) < 350
-
-
-def test_displacements_of_the_zero_offset_are_zero():
-    arm = make_arm("psm2")
-    q = arm.servo.setpoint_jp()
-    d = displacements(arm, q, np.zeros((1, 3)))
-    np.testing.assert_allclose(d, 0.0, atol=1e-15)
 
 
 def test_offsets_left_by_a_refusal_move_the_presentation():

@@ -43,3 +43,10 @@ def test_offset_displacements_hold_the_zero_offset_and_reach_the_worst_corner():
     assert d.shape == (9, 3)
     np.testing.assert_allclose(d[0], 0.0)
     assert np.linalg.norm(d, axis=1).max() == pytest.approx(worst_offset_displacement(q))
+
+
+def test_tip_displacements_of_the_zero_offset_are_zero():
+    from suture_bt.skills.tip_uncertainty import tip_displacements
+
+    q = np.array([-0.4, -0.22, 0.139, -1.64, -0.37, -0.11])
+    np.testing.assert_allclose(tip_displacements(q, np.zeros((1, 3))), 0.0, atol=1e-15)
