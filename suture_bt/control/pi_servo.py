@@ -284,7 +284,9 @@ class PIServo:
         makes a PI loop lag on a stiction plant. So each joint remembers the integrator of its
         last motion in each direction (speeds inside ``direction_deadband`` count as rest) and
         starts every motion from it; a direction never seen starts from the mirror image of the
-        other one (a friction-dominated guess).
+        other one (a friction-dominated guess). A memory that would move the integrator against
+        the new direction is stale (friction compensation for motion in direction d is load + d·f,
+        f ≥ 0, so starting to move in d can only shift it toward d) and is not used.
         """
         db = self.gains.direction_deadband
         moving = np.abs(velocity) > db
@@ -293,7 +295,8 @@ class PIServo:
         for j in np.nonzero(starting)[0]:
             k = (new[j] + 1) // 2
             if self._learned[k, j]:
-                self.integrator[j] = self._memory[k, j]
+                if new[j] * (self._memory[k, j] - self.integrator[j]) >= 0.0:
+                    self.integrator[j] = self._memory[k, j]
             elif self.direction[j] != 0 and new[j] != self.direction[j]:
                 self.integrator[j] = -self.integrator[j]
         self.direction = new

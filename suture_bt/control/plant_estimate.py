@@ -13,6 +13,13 @@ Recursive least squares with forgetting fits (a, b, c, d) on samples where the j
 (|q̇| above ``min_speed``, no reversal or stick inside the 3-sample window: static friction
 breaks the model there). ``q̇`` and ``q̈`` are central differences of the measured joints, and
 the command over the window is the mean of the two held commands.
+
+With ``a = b²/4`` (critical damping, the default) the model is nonlinear in b; each update is
+a Gauss-Newton step linearised at the current b (regressor ``q̇ + b·q̈/2``). Substituting the
+current b² into a instead, as a fixed point, diverges whenever a joint decelerates hard
+(|q̈/q̇| > 2/b): b grew to 10¹² within 0.2 s on a 6 Hz joint and the loop then scheduled itself
+for a 1 Hz plant, overshooting by 5° on the next fast move. Updates that leave b outside
+:data:`LAG_RANGE` or produce non-finite values are rejected and the covariance is reset.
 """
 
 from __future__ import annotations
@@ -29,6 +36,12 @@ PLAUSIBLE_HZ = (1.0, 40.0)
 MIN_SAMPLES = 30
 #: Slowest joint speed that counts as sliding (rad/s; m/s for insertion).
 MIN_SPEED = np.array([0.01, 0.01, 0.0005, 0.01, 0.01, 0.01])
+#: Kd/Kp (s) an update may leave: 2ζ/ω for ζ in [0.4, 2.5] over :data:`PLAUSIBLE_HZ`.
+LAG_RANGE = (2 * 0.4 / (2 * np.pi * PLAUSIBLE_HZ[1]), 2 * 2.5 / (2 * np.pi * PLAUSIBLE_HZ[0]))
+#: Prior covariance (also what a rejected update resets to): loose on every parameter.
+PRIOR_COVARIANCE = np.diag([1e-4, 1e-2, 1e-4, 1e-4])
+#: Covariance trace bound: forgetting without excitation (a hold) would inflate P without limit.
+MAX_COVARIANCE_TRACE = 10 * float(np.trace(PRIOR_COVARIANCE))
 
 
 class PlantEstimator:
@@ -48,7 +61,9 @@ class PlantEstimator:
         w = 2 * np.pi * PRIOR_BANDWIDTH_HZ
         self.theta = np.tile([1.0 / w**2, 2.0 / w, 0.0, 0.0], (NUM_JOINTS, 1))
         # Prior covariance: loose on every parameter (the prior only fills in until data).
-        self.P = np.tile(np.diag([1e-4, 1e-2, 1e-4, 1e-4]), (NUM_JOINTS, 1, 1))
+        self.P = np.tile(PRIOR_COVARIANCE, (NUM_JOINTS, 1, 1))
+        #: Updates rejected per joint (non-finite or implausible lag), for logs and tests.
+        self.rejected = np.zeros(NUM_JOINTS, dtype=int)
         self.samples = np.zeros(NUM_JOINTS, dtype=int)
         self._bandwidth = np.full(NUM_JOINTS, w)
         self._lag = np.full(NUM_JOINTS, 2.0 / w)
@@ -76,17 +91,25 @@ class PlantEstimator:
         sliding = (np.sign(d1) == np.sign(d2)) & (np.abs(d1) > step) & (np.abs(d2) > step)
         y = 0.5 * (self._u[0] + self._u[1]) - q1
         for j in np.nonzero(sliding)[0]:
+            b0 = self.theta[j, 1]
             if self.fit_stiffness:
-                phi = np.array([acc[j], v[j], np.sign(v[j]), 1.0])
-            else:  # a = b²/4 (critical damping) from the current b: 3 free parameters
-                self.theta[j, 0] = 0.25 * self.theta[j, 1] ** 2
-                y[j] -= self.theta[j, 0] * acc[j]
-                phi = np.array([0.0, v[j], np.sign(v[j]), 1.0])
+                phi, target = np.array([acc[j], v[j], np.sign(v[j]), 1.0]), y[j]
+            else:  # a = b²/4: Gauss-Newton in b about b0 (see the module docstring)
+                phi = np.array([0.0, v[j] + 0.5 * b0 * acc[j], np.sign(v[j]), 1.0])
+                target = y[j] + 0.25 * b0**2 * acc[j]
             P = self.P[j]
             Pphi = P @ phi
             gain = Pphi / (self.forgetting + phi @ Pphi)
-            self.theta[j] += gain * (y[j] - phi @ self.theta[j])
-            self.P[j] = (P - np.outer(gain, Pphi)) / self.forgetting
+            theta = self.theta[j] + gain * (target - phi @ self.theta[j])
+            P_new = (P - np.outer(gain, Pphi)) / self.forgetting
+            if not (np.all(np.isfinite(theta)) and LAG_RANGE[0] <= theta[1] <= LAG_RANGE[1]):
+                self.rejected[j] += 1
+                self.P[j] = PRIOR_COVARIANCE.copy()
+                continue
+            trace = float(np.trace(P_new))
+            if trace > MAX_COVARIANCE_TRACE:
+                P_new *= MAX_COVARIANCE_TRACE / trace
+            self.theta[j], self.P[j] = theta, P_new
             self.samples[j] += 1
             if not self.fit_stiffness:
                 self.theta[j, 0] = 0.25 * self.theta[j, 1] ** 2
