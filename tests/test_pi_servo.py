@@ -277,14 +277,19 @@ class ServoArm:
 
 
 def _settled_error(
-    bandwidth_hz: float, gains: PIGains | None, enabled: bool = True, return_servo: bool = False
+    bandwidth_hz: float,
+    gains: PIGains | None,
+    enabled: bool = True,
+    return_servo: bool = False,
+    moves: int = 4,
 ):
-    """Mean |error| of the revolute joints at the end of 0.8 s holds after four ramps (rad)."""
+    """Mean |error| of the revolute joints at the end of 0.8 s holds after ``moves`` ramps
+    (rad)."""
     arm = ServoArm(bandwidth_hz)
     pi = PIServo(arm, gains=gains, enabled=enabled)
     rng = np.random.default_rng(3)
     q, errors, every = Q0.copy(), [], round(pi.dt / PHYSICS_DT)
-    for _ in range(4):
+    for _ in range(moves):
         goal = q + rng.uniform(-0.3, 0.3, 6) * np.array([1, 1, 0.05, 1, 1, 1])
         for k in range(round(1.6 / PHYSICS_DT)):
             if k % every == 0:
@@ -308,11 +313,9 @@ def test_adaptive_loop_removes_the_error_on_slow_and_fast_plants_it_is_not_told(
         assert adaptive < 0.5 * _settled_error(bandwidth_hz, PIGains(adaptive=False))
 
 
-def test_plant_estimate_tells_slow_from_fast_plants_from_measured_joints_only():
-    estimates = {}
-    for bandwidth_hz in (3.0, 12.0):
-        pi = _settled_error(bandwidth_hz, None, return_servo=True)
-        estimates[bandwidth_hz] = pi.estimator.bandwidth[[0, 1, 3, 5]] / (2 * np.pi)
-    np.testing.assert_allclose(estimates[3.0], 3.0, rtol=0.25)
-    # Fast plants come out slower than they are (biased low: conservative gains), but faster.
-    assert np.all(estimates[12.0] > 1.2 * estimates[3.0])
+def test_plant_estimate_converges_to_slow_and_fast_plants_from_measured_joints_only():
+    # Twelve ramps (1.6 s each): the estimate starts at the nominal 6 Hz and converges.
+    for bandwidth_hz in (3.0, 6.0, 12.0):
+        pi = _settled_error(bandwidth_hz, None, return_servo=True, moves=12)
+        estimate = pi.estimator.bandwidth[[0, 1, 3, 4, 5]] / (2 * np.pi)
+        np.testing.assert_allclose(estimate, bandwidth_hz, rtol=0.1)
