@@ -21,13 +21,19 @@ from suture_bt.skills.motion import move_to, together
 from suture_bt.skills.offset_evidence import offset_grid, unseen_offsets
 from suture_bt.skills.tip_uncertainty import worst_offset_displacement
 
-#: A held needle's wire must pass this close to the holder's pinch point (m) once the arm is
-#: calibrated; before, the margin adds the tip displacement of the largest hidden joint
+#: A held needle's wire must pass this close to the holder's blades (m; anywhere along the
+#: stretch that holds it, ``in_hand.BLADE_Z_RANGE``) once the arm is calibrated; before, the
+#: margin adds the tip displacement of the largest hidden joint
 #: offset the task allows (SRC: 5°, 5°, 5 mm) at the arm's present joints.
 HOLD_TOLERANCE_CALIBRATED = 0.002
 HOLD_MARGIN_UNCALIBRATED = 0.004
 #: Presentation poses tried before giving up.
 MAX_PRESENTATIONS = 7
+#: Refusals in a row after which presentations chosen from a held needle's in-hand belief
+#: stop trusting it: the belief is dropped and the rest are chosen for a needle of unknown
+#: pose (whole circle). A confidently wrong first estimate (a twin sharing the tip, seen on
+#: a campaign trial: 24 mm off at the base) otherwise aims every presentation wrongly.
+DOUBT_AFTER = 3
 
 
 class LocalizeNeedle(Skill):
@@ -69,7 +75,7 @@ class LocalizeNeedle(Skill):
             if obs is not None:
                 self._adopt(obs)
                 return
-            if self.narrow_offsets(arm):
+            if self.narrow_offsets(arm) or self._doubt_belief(len(tried)):
                 poses = presentation.untried(presentation.choose(ctx, arm)[0], tried)
         raise SkillFailure(f"needle held by {arm.name} not localised: {'; '.join(reasons)}")
 
@@ -85,6 +91,17 @@ class LocalizeNeedle(Skill):
             return False  # a contradiction (the network missed it) or nothing learnt
         arm.possible_offsets = left
         self.report.setdefault("offsets_left", []).append(len(left))
+        return True
+
+    def _doubt_belief(self, refused: int) -> bool:
+        """After ``DOUBT_AFTER`` refusals in a row, drop an in-hand belief of this holder (the
+        presentations chosen from it are not working). True when one was dropped."""
+        b = self.context.belief
+        if refused < DOUBT_AFTER or b is None or b.holder != self.holder or b.T_tip_needle is None:
+            return False
+        self.context.belief = None
+        self.report["belief_dropped_after"] = refused
+        self.say(f"{refused} refusals in a row: presenting as if the needle's pose were unknown")
         return True
 
     def _target(self, T_present: np.ndarray) -> np.ndarray:
@@ -120,8 +137,8 @@ class LocalizeNeedle(Skill):
             )
             ok = grip.plausible
             detail = (
-                f"wire {grip.jaw_distance * 1e3:.1f} mm from {arm.name}'s pinch point "
-                f"(limit {tol * 1e3:.0f} mm)"
+                f"wire {grip.blade_distance * 1e3:.1f} mm from {arm.name}'s blades, "
+                f"{grip.jaw_distance * 1e3:.1f} mm from its pinch point (limit {tol * 1e3:.0f} mm)"
             )
             self.report["checks"].append(
                 {"check": "held by " + arm.name, "ok": ok, "detail": detail}

@@ -28,9 +28,10 @@ def test_uncompensated_offset_biases_the_in_hand_transform():
     model = NeedleModel()
     true_cp = forward_kinematics(Q)
     T_world_needle = BASE @ true_cp @ grasp_transform(model, 2.6, flip=False)
-    measured_cp = forward_kinematics(Q - np.array([np.deg2rad(2.0), 0, 0.003, 0, 0, 0]))
-    est = estimate_in_hand(T_world_needle, measured_cp, BASE, model)
-    assert est.jaw_distance > 0.003 and not est.plausible
+    # Joints 1-2 swing the jaw sideways (an insertion offset slides it along the blades).
+    dq = np.array([np.deg2rad(2.0), np.deg2rad(2.0), 0.0, 0, 0, 0])
+    est = estimate_in_hand(T_world_needle, forward_kinematics(Q - dq), BASE, model)
+    assert est.jaw_distance > 0.003 and est.blade_distance > 0.003 and not est.plausible
 
 
 def test_bad_input_is_rejected():
@@ -62,3 +63,15 @@ def test_uncalibrated_margin_keeps_a_correct_estimate_plausible():
     margin = 0.001 + worst_offset_displacement(Q)
     est = estimate_in_hand(T_world_needle, measured_cp, BASE, model, margin, calibrated=False)
     assert est.plausible and est.valid_only_where_measured
+
+
+def test_a_wire_held_deeper_along_the_blades_is_plausible_one_beside_them_is_not():
+    model = NeedleModel()
+    cp = forward_kinematics(Q)
+    T_tip_needle = grasp_transform(model, 2.6, flip=False)
+    for shift, plausible in ((np.array([0.0, 0.0, -0.0025]), True), (np.array([0.0, 0.0025, 0.0]), False)):
+        T = T_tip_needle.copy()
+        T[:3, 3] += shift  # the needle moved in the tip frame: along the blades, or off them
+        est = estimate_in_hand(BASE @ cp @ T, cp, BASE, model, max_jaw_distance=0.002)
+        assert est.jaw_distance == pytest.approx(0.0025, abs=2e-4)
+        assert est.plausible is plausible, (shift, est.blade_distance)

@@ -14,10 +14,15 @@ from dataclasses import dataclass
 import numpy as np
 
 from suture_bt.geometry import NeedleModel
+from suture_bt.kinematics.psm import L_YAW2CTRLPNT
 from suture_bt.transforms import invert
 
 #: Where the held wire sits in the tip frame: between the blades, behind the control point.
 JAW_POINT_IN_TIP = np.array([0.0, 0.0, -0.0015])
+#: The stretch of the tip z axis between the blades that can hold the wire (m): from 3 mm past
+#: the wrist-yaw pivot to the blade end (large needle driver). A wire held anywhere along it
+#: is held: a grasp that closed 2.5 mm deeper than the pinch point is not "another needle".
+BLADE_Z_RANGE = (-L_YAW2CTRLPNT + 0.003, 0.0019)
 
 
 #: Tip moves (m, rad) within which an uncalibrated arm's in-hand estimate still holds: the
@@ -43,11 +48,15 @@ class InHandEstimate:
 
     T_tip_needle: np.ndarray
     grasp_arc_angle: float
+    #: Distance (m) of the wire from the pinch point (``JAW_POINT_IN_TIP``).
     jaw_distance: float
     plausible: bool
     calibrated: bool | None = None
     #: The reported tip pose (arm base frame) the estimate was measured at.
     measured_cp: np.ndarray | None = None
+    #: Distance (m) of the wire from the blades' holding stretch (``BLADE_Z_RANGE`` on tip z):
+    #: what ``plausible`` compares with ``max_jaw_distance``.
+    blade_distance: float = float("nan")
 
     @property
     def valid_only_where_measured(self) -> bool:
@@ -85,21 +94,26 @@ def estimate_in_hand(
     max_jaw_distance: float = 0.003,
     calibrated: bool | None = None,
 ) -> InHandEstimate:
-    """The in-hand transform plus the grasped arc angle; implausible if the wire is far
-    (> ``max_jaw_distance``) from the point between the jaws. ``calibrated``: whether the
-    arm's offset is compensated (see :class:`InHandEstimate` for what an uncalibrated one
-    absorbs)."""
+    """The in-hand transform plus the grasped arc angle; implausible if the wire is farther
+    than ``max_jaw_distance`` from the stretch between the blades that holds it. ``calibrated``:
+    whether the arm's offset is compensated (see :class:`InHandEstimate` for what an
+    uncalibrated one absorbs)."""
     model = model or NeedleModel()
     T = in_hand_transform(T_world_needle, measured_cp, T_world_base)
     jaw_in_needle = invert(T)[:3, :3] @ JAW_POINT_IN_TIP + invert(T)[:3, 3]
     angles = np.linspace(model.tip_angle, model.base_angle, 721)
-    d = np.linalg.norm(model.point_at(angles) - jaw_in_needle, axis=1)
-    i = int(np.argmin(d))
+    arc = model.point_at(angles)
+    d = np.linalg.norm(arc - jaw_in_needle, axis=1)
+    in_tip = arc @ T[:3, :3].T + T[:3, 3]
+    along = np.clip(in_tip[:, 2], *BLADE_Z_RANGE)
+    blade = np.sqrt(in_tip[:, 0] ** 2 + in_tip[:, 1] ** 2 + (in_tip[:, 2] - along) ** 2)
+    i, k = int(np.argmin(d)), int(np.argmin(blade))
     return InHandEstimate(
         T,
         float(angles[i]),
         float(d[i]),
-        bool(d[i] <= max_jaw_distance),
+        bool(blade[k] <= max_jaw_distance),
         calibrated,
         np.array(measured_cp, dtype=float),
+        float(blade[k]),
     )
