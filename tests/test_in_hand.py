@@ -69,7 +69,8 @@ def test_a_wire_held_deeper_along_the_blades_is_plausible_one_beside_them_is_not
     model = NeedleModel()
     cp = forward_kinematics(Q)
     T_tip_needle = grasp_transform(model, 2.6, flip=False)
-    for shift, plausible in ((np.array([0.0, 0.0, -0.0025]), True), (np.array([0.0, 0.0025, 0.0]), False)):
+    cases = ((np.array([0.0, 0.0, -0.0025]), True), (np.array([0.0, 0.0025, 0.0]), False))
+    for shift, plausible in cases:
         T = T_tip_needle.copy()
         T[:3, 3] += shift  # the needle moved in the tip frame: along the blades, or off them
         est = estimate_in_hand(BASE @ cp @ T, cp, BASE, model, max_jaw_distance=0.002)
