@@ -34,6 +34,8 @@ MAX_PRESENTATIONS = 7
 #: pose (whole circle). A confidently wrong first estimate (a twin sharing the tip, seen on
 #: a campaign trial: 24 mm off at the base) otherwise aims every presentation wrongly.
 DOUBT_AFTER = 3
+#: A presentation whose pinch point is this close to an avoided pose's counts as the same view.
+AVOID_RADIUS = 0.008
 
 
 class LocalizeNeedle(Skill):
@@ -41,10 +43,18 @@ class LocalizeNeedle(Skill):
 
     name = "localize needle"
 
-    def __init__(self, context: TaskContext, holder: str | None = None, present: bool = True):
+    def __init__(
+        self,
+        context: TaskContext,
+        holder: str | None = None,
+        present: bool = True,
+        avoid: tuple[np.ndarray, ...] = (),
+    ):
         super().__init__(context)
         self.holder = holder
         self.present = present
+        #: Presentation poses not to use (a caller's second opinion wants another view).
+        self.avoid = [np.asarray(T, dtype=float) for T in avoid]
         self._unseen_eye: str | None = None
 
     def program(self) -> Waiting:
@@ -59,6 +69,7 @@ class LocalizeNeedle(Skill):
             return
         arm = ctx.arm(self.holder)
         poses, why = presentation.choose(ctx, arm)
+        poses = presentation.untried(poses, self.avoid, AVOID_RADIUS)
         if not poses:
             raise SkillFailure(f"{arm.name} has no reachable presentation pose ({why[:1]})")
         self.report["presentation_poses"] = [T.tolist() for T in poses]
@@ -77,6 +88,7 @@ class LocalizeNeedle(Skill):
                 return
             if self.narrow_offsets(arm) or self._doubt_belief(len(tried)):
                 poses = presentation.untried(presentation.choose(ctx, arm)[0], tried)
+                poses = presentation.untried(poses, self.avoid, AVOID_RADIUS)
         raise SkillFailure(f"needle held by {arm.name} not localised: {'; '.join(reasons)}")
 
     def narrow_offsets(self, arm) -> bool:
