@@ -108,6 +108,9 @@ class NeedleBelief:
     T_tip_needle: np.ndarray | None = None
     angle_std_deg: float = float("nan")
     position_std_mm: float = float("nan")
+    #: (holder, its tip pose in the world) when this estimate was adopted: while that arm has
+    #: not moved, the estimate is as fresh as a new look (uncalibrated arms included).
+    seen_at: tuple[str, np.ndarray] | None = None
 
 
 @dataclass
@@ -164,9 +167,11 @@ class TaskContext:
 
     def believe(self, obs: NeedleObservation, holder: str | None) -> NeedleBelief:
         """Adopt an observation; with a holder, re-estimate the in-hand transform from it."""
-        T_tip = None
+        T_tip = seen_at = None
         if holder is not None:
-            T_tip = invert(self.arm(holder).tip_world()) @ obs.T_world_needle
+            T_world_tip = self.arm(holder).tip_world()
+            T_tip = invert(T_world_tip) @ obs.T_world_needle
+            seen_at = (holder, T_world_tip)
         self.belief = NeedleBelief(
             obs.T_world_needle.copy(),
             obs.stamp,
@@ -175,5 +180,6 @@ class TaskContext:
             T_tip,
             obs.angle_std_deg,
             obs.position_std_mm,
+            seen_at,
         )
         return self.belief

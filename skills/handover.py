@@ -12,7 +12,9 @@ from __future__ import annotations
 
 import numpy as np
 
+from suture_bt.geometry.tissue_surface import height_above_tissue
 from suture_bt.kinematics import UnreachablePoseError, inverse_kinematics
+from suture_bt.perception.in_hand import JAW_POINT_IN_TIP
 from suture_bt.planning import NeedleArcError, plan_needle_arc, to_base
 from suture_bt.planning.trajectory import JOINT_VEL
 from suture_bt.skills import checks, presentation
@@ -23,6 +25,7 @@ from suture_bt.skills.insert import LIFT, PRE_ARC
 from suture_bt.skills.line_of_sight import clear_tip_pose
 from suture_bt.skills.localize_needle import LocalizeNeedle
 from suture_bt.skills.motion import FINE, feasible, jaw_to, move_to, together
+from suture_bt.transforms import rotation_angle
 
 #: The taker comes in along its jaws from this far back (m); the giver backs off as far.
 APPROACH = 0.010
@@ -30,6 +33,8 @@ APPROACH = 0.010
 JAW_OPEN = 0.8
 #: The taker waits this far back along its jaws while the giver presents (m).
 STANDBY = 0.020
+#: The giver counts as not moved since the needle was seen in its jaw within this (m, deg).
+STILL_POSITION, STILL_ANGLE_DEG = 0.0003, 0.5
 
 
 class Handover(Skill):
@@ -71,6 +76,27 @@ class Handover(Skill):
             return float("inf")
         return float(np.max(np.abs(q_lift - q_grasp) / JOINT_VEL))
 
+    def _seen_here(self, giver) -> np.ndarray | None:
+        """The giver's pose when the needle was last seen in its jaw there and it has not moved
+        since, the pinch standing as high above the tissue as a presentation's and the needle
+        clear of it (else None): the estimate is as good as a new look from that pose."""
+        ctx = self.context
+        b = ctx.belief
+        if b is None or b.seen_at is None or b.seen_at[0] != self.giver or b.holder != self.giver:
+            return None
+        T_then, T_now = b.seen_at[1], giver.tip_world()
+        moved = np.linalg.norm(T_now[:3, 3] - T_then[:3, 3])
+        turned = np.rad2deg(rotation_angle(T_now[:3, :3], T_then[:3, :3]))
+        if moved > STILL_POSITION or turned > STILL_ANGLE_DEG:
+            return None
+        T_here = giver.commanded_tip_world()
+        pinch = T_here[:3, :3] @ JAW_POINT_IN_TIP + T_here[:3, 3]
+        if height_above_tissue(ctx.phantom, pinch[None])[0] < presentation.MIN_PINCH_CLEARANCE:
+            return None
+        if presentation.needle_clearance(ctx, giver, T_here) < presentation.MIN_NEEDLE_CLEARANCE:
+            return None
+        return T_here
+
     def program(self) -> Waiting:
         ctx = self.context
         giver, taker = ctx.arm(self.giver), ctx.arm(self.taker)
@@ -109,15 +135,20 @@ class Handover(Skill):
             )
         if self.next_pair is not None:
             poses = sorted(poses, key=lambda T: self._time_to_next(taker, T, T_hand))
+        T_here = self._seen_here(giver)
+        if T_here is not None and not taker_can_reach(T_here):
+            # Just seen where it is, at a pose safe for presenting: taken there, no new look.
+            poses = [T_here] + presentation.untried(poses, [T_here])
+            self.report["taken_where_seen"] = True
         self.say(f"{self.giver} presents the needle for {self.taker}")
         taker.arm.jaw.move_jp(np.array([JAW_OPEN]))  # opens while the giver presents
         tried: list[np.ndarray] = []
         while poses and len(tried) < presentation.CHOSEN:
             T = poses.pop(0)
             tried.append(T)
-            present = move_to(
-                ctx.clock, giver, presentation.lifted_first(ctx, giver, T), "present the needle"
-            )
+            here = T is T_here  # no move, no look: the needle was just seen there
+            path = presentation.lifted_first(ctx, giver, T)
+            present = iter(()) if here else move_to(ctx.clock, giver, path, "present the needle")
             # The taker waits a little back along its jaws, out of the cameras' sight.
             T_needle_there = T @ ctx.belief.T_tip_needle
             rcm, centre = taker.base_frame()[:3, 3], T_needle_there[:3, 3]
@@ -133,7 +164,8 @@ class Handover(Skill):
                 yield from present
             look = LocalizeNeedle(ctx, self.giver, present=False)
             try:
-                yield from self.run(look)
+                if not here:
+                    yield from self.run(look)
             except SkillFailure as e:
                 self.report.setdefault("refusals", []).append(e.reason)
                 if look.narrow_offsets(giver):  # not seen at all: present it elsewhere

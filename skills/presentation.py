@@ -14,8 +14,8 @@ surface under it (the flat top and the ridge of the ports,
 whole circle on either side of the jaw; each moved by every tip displacement the task's offset
 bound allows an uncalibrated arm (at the Task 3 start up to about 20 mm: such an arm presents
 higher and beside the ridge). Safe poses that keep the needle in view under half those
-displacements come first (nearest point, then least wrist bend), then other safe ones, then the
-rest, highest first. Everything is derived from the camera model, the port frames and the arm's
+displacements come first (nearest point, then a believed needle facing the cameras, then least
+wrist bend), then other safe ones, then the rest, highest first. Everything is derived from the camera model, the port frames and the arm's
 joints, so a moved, rotated or tilted phantom works the same.
 """
 
@@ -73,6 +73,10 @@ DIRECTIONS = [
     (-0.5, 1.0, 1.0),
 ]
 ROLLS = np.deg2rad(np.arange(0.0, 360.0, 45.0))
+#: A held needle whose believed plane is turned more than this from the left camera's line of
+#: sight is presented after those that face it (deg): on a full run every look at 54-66° was
+#: refused (a loose pose, 33-40° spread) and every one at 22-46° answered.
+FACE_ON_DEG = 45.0
 #: How many poses :func:`choose` returns (a skill presents them in turn until one answers).
 CHOSEN = 7
 #: Presentation points whose poses are taken in turn (a refusal moves to the next point).
@@ -165,6 +169,18 @@ def in_view(ctx: TaskContext, points_world: np.ndarray) -> bool:
     return True
 
 
+def face_on(ctx: TaskContext, arm: ArmHandle, T_tip: np.ndarray) -> bool:
+    """Whether the believed needle at this jaw pose faces the left camera within
+    ``FACE_ON_DEG`` (True when the in-hand pose is not known: nothing to prefer)."""
+    b = ctx.belief
+    if b is None or b.holder != arm.name or b.T_tip_needle is None:
+        return True
+    T_needle = T_tip @ b.T_tip_needle
+    ray = T_needle[:3, 3] - ctx.camera.model.left.T_world_cam[:3, 3]
+    cos = abs(float(T_needle[:3, 2] @ ray)) / float(np.linalg.norm(ray))
+    return bool(np.degrees(np.arccos(min(cos, 1.0))) <= FACE_ON_DEG)
+
+
 def _ik(arm: ArmHandle, T_world_tip: np.ndarray, q_near: np.ndarray) -> np.ndarray | None:
     try:
         return inverse_kinematics(to_base(T_world_tip, arm.base_frame()), q_near)
@@ -226,7 +242,8 @@ def _safe_by_point(
                 continue
             # The corners again at the pose's own joints; a grid a look left, as at the shaft.
             d = d_shaft if offsets is not None else _displacements(arm, q)
-            bend = (abs(q[4]) + abs(q[5]) + 0.3 * abs(q[3] - q_now[3]), len(best), T)
+            wrist = abs(q[4]) + abs(q[5]) + 0.3 * abs(q[3] - q_now[3])
+            bend = (not face_on(ctx, arm, T), wrist, len(best), T)
             if clearance_at(ctx, arm, T, d) < MIN_NEEDLE_CLEARANCE:
                 later.append((-clear, T))
             elif not in_view(ctx, (places[:, None, :] + VIEW_SHARE * d).reshape(-1, 3)):
@@ -235,8 +252,8 @@ def _safe_by_point(
                 best.append(bend)
         yield (
             bool(best),
-            [T for *_, T in sorted(best, key=lambda c: c[:2])]
-            + [T for *_, T in sorted(seen_as_planned, key=lambda c: c[:2])],
+            [T for *_, T in sorted(best, key=lambda c: c[:3])]
+            + [T for *_, T in sorted(seen_as_planned, key=lambda c: c[:3])],
         )
 
 
