@@ -140,18 +140,43 @@ def residuals(
     ``theta`` fixes the nearest-point angles; ``theta_start`` seeds their Newton search from a
     nearby pose's angles.
     """
-    o, d = _to_needle(T, rays)
-    if theta is None:
-        theta = nearest_arc_angle(o, d, model, grid=grid, start=theta_start)
-    f, qd = _arc_f(theta, o, d, model.radius)
-    dist = np.sqrt(np.maximum(f, 0.0))
-    depth = qd * rays.dz[None]
-    r = (dist - model.wire_radius) * rays.focal[None] / np.where(depth > 1e-6, depth, np.nan)
+    r, theta, _ = residuals_and_geometry(T, rays, model, theta, theta_start, grid)
     return r, theta
 
 
+def residuals_and_geometry(
+    T: np.ndarray,
+    rays: EdgeRays,
+    model: NeedleModel,
+    theta: np.ndarray | None = None,
+    theta_start: np.ndarray | None = None,
+    grid: int = N_THETA_GRID,
+):
+    """:func:`residuals` and the per-ray quantities behind them (``[o, d, cos θ, sin θ, a, b,
+    qd]``), which :func:`edge_jacobian` at the same poses and angles reuses rather than
+    recomputes."""
+    o, d = _to_needle(T, rays)
+    if theta is None:
+        theta = nearest_arc_angle(o, d, model, grid=grid, start=theta_start)
+    # _arc_f, keeping its intermediates.
+    c, s = np.cos(theta), np.sin(theta)
+    rad = model.radius
+    a, b = rad * c - o[0], rad * s - o[1]
+    qd = a * d[0] + b * d[1] - o[2] * d[2]
+    f = a * a + b * b + o[2] * o[2] - qd * qd
+    dist = np.sqrt(np.maximum(f, 0.0))
+    depth = qd * rays.dz[None]
+    r = (dist - model.wire_radius) * rays.focal[None] / np.where(depth > 1e-6, depth, np.nan)
+    return r, theta, [o, d, c, s, a, b, qd]
+
+
 def edge_jacobian(
-    T: np.ndarray, dT: np.ndarray, rays: EdgeRays, model: NeedleModel, theta: np.ndarray
+    T: np.ndarray,
+    dT: np.ndarray,
+    rays: EdgeRays,
+    model: NeedleModel,
+    theta: np.ndarray,
+    geometry: list | None = None,
 ) -> np.ndarray:
     """Jacobian (K, P, N) of the edge residuals at poses T (K, 4, 4), given the poses'
     derivatives dT (K, P, 4, 4) in P parameters.
@@ -162,12 +187,18 @@ def edge_jacobian(
     e = a - qd d and residual r = (|e| - wire radius) f / (qd d_z):
     dr/dX = f / (qd d_z) (e / |e| - (|e| - wire radius) / qd · d). With X = R P(θ) + p, in the
     needle frame R^T dX = (R^T dR) P + R^T dp: one small batched matrix product per start.
+    ``geometry``: :func:`residuals_and_geometry`'s quantities at these poses and angles.
     """
-    o, d = _to_needle(T, rays)
-    r = model.radius
-    P = (r * np.cos(theta), r * np.sin(theta))
-    a = (P[0] - o[0], P[1] - o[1], -o[2])
-    qd = a[0] * d[0] + a[1] * d[1] + a[2] * d[2]
+    if geometry is None:
+        o, d = _to_needle(T, rays)
+        c, s = np.cos(theta), np.sin(theta)
+        a0, a1 = model.radius * c - o[0], model.radius * s - o[1]
+        # The same bits as a0 d0 + a1 d1 + (-o2) d2 (negation is exact).
+        qd = a0 * d[0] + a1 * d[1] - o[2] * d[2]
+    else:
+        o, d, c, s, a0, a1, qd = geometry
+    P = (model.radius * c, model.radius * s)
+    a = (a0, a1, -o[2])
     e = [a[i] - qd * d[i] for i in range(3)]
     dist = np.sqrt(e[0] * e[0] + e[1] * e[1] + e[2] * e[2])
     k = rays.focal[None] / (qd * rays.dz[None])

@@ -6,7 +6,12 @@ import numpy as np
 
 from suture_bt.geometry import NeedleModel
 from suture_bt.interfaces import StereoCameraModel
-from suture_bt.perception.edge_residuals import EdgeRays, edge_jacobian, residuals
+from suture_bt.perception.edge_residuals import (
+    EdgeRays,
+    edge_jacobian,
+    residuals,
+    residuals_and_geometry,
+)
 from suture_bt.perception.needle_projection import params_to_pose
 
 #: Finite-difference steps of the six parameters (px, px, px, px, rad, rad) for the pose's
@@ -66,11 +71,11 @@ def levenberg_marquardt(
     colw = np.concatenate([np.ones(len(rays))] + [e.column_weights(len(rays)) for e in extras])
 
     def both(T, *a, **k):
-        r, th = residuals(T, rays, model, *a, **k)
-        return (np.concatenate([r] + [e(T) for e in extras], 1) if extras else r), th
+        r, th, geo = residuals_and_geometry(T, rays, model, *a, **k)
+        return (np.concatenate([r] + [e(T) for e in extras], 1) if extras else r), th, geo
 
     T = params_to_pose(x, cam, model)
-    r, theta = both(T)
+    r, theta, geo = both(T)
     cost = robust_cost(r, sigma, colw, loss)
     lam = np.full(len(x), 1e-2)
     n_edge = len(rays)
@@ -84,7 +89,7 @@ def levenberg_marquardt(
         # Pose derivatives by finite differences (cheap: 6 poses per start), residual
         # derivatives analytically for the edge points, by differences for the extra terms.
         T6, dT = _pose_derivatives(x, T, cam, model)
-        J = edge_jacobian(T, dT, rays, model, theta)
+        J = edge_jacobian(T, dT, rays, model, theta, geo)
         if extras:
             re = np.concatenate([e(T6.reshape(-1, 4, 4)) for e in extras], 1)
             re = re.reshape(len(x), 6, -1) - rr[:, None, n_edge:]
@@ -101,9 +106,15 @@ def levenberg_marquardt(
             break
         xn = x + delta
         Tn = params_to_pose(xn, cam, model)
-        rn, thn = both(Tn, theta_start=theta)
+        rn, thn, geon = both(Tn, theta_start=theta)
         cn = robust_cost(rn, sigma, colw, loss)
         better = cn < cost
+        # The accepted rows' residual geometry, for the next Jacobian.
+        if better.all():
+            geo = geon
+        else:
+            for g, gn in zip(geo, geon, strict=True):
+                g[..., better, :] = gn[..., better, :]
         x[better], T[better], r[better], theta[better], cost[better] = (
             xn[better],
             Tn[better],
