@@ -76,13 +76,15 @@ def _arc_f(theta, o, d, r):
     return a * a + b * b + o[2] * o[2] - qd * qd, qd
 
 
-def _newton_step(theta, o, d, od, r):
+def _newton_step(theta, o, d, od, r, cs=None):
     """Newton step f'/f'' of the squared ray distance f in theta, 0 where f is not convex.
 
     With u = cos θ d0 + sin θ d1, v = cos θ d1 - sin θ d0 and the along-ray distance
     qd = r u - o·d: f'/2r = o0 sin θ - o1 cos θ - qd v, f''/2r = o0 cos θ + o1 sin θ - r v² + qd u.
+    ``cs``: (cos θ, sin θ) when already known (numpy's float64 cos and sin are libm's, per
+    element, and cost more than the rest of the step together).
     """
-    c, s = np.cos(theta), np.sin(theta)
+    c, s = (np.cos(theta), np.sin(theta)) if cs is None else cs
     u = c * d[0] + s * d[1]
     v = c * d[1] - s * d[0]
     qd = r * u - od
@@ -97,10 +99,12 @@ def nearest_arc_angle(
     model: NeedleModel,
     grid: int = N_THETA_GRID,
     start: np.ndarray | None = None,
+    start_cs: tuple[np.ndarray, np.ndarray] | None = None,
 ):
     """Arc angle (K, N) of the centre-line point nearest each ray (clamped to the arc's ends).
 
-    A grid search then Newton steps; with ``start`` (angles of a nearby pose) Newton only.
+    A grid search then Newton steps; with ``start`` (angles of a nearby pose) Newton only,
+    ``start_cs`` being their cosines and sines if known.
     ``o``, ``d`` are component first (see :func:`_to_needle`).
     """
     lo, hi = model.tip_angle, model.base_angle
@@ -118,11 +122,13 @@ def nearest_arc_angle(
         q *= q
         m *= -2 * r
         m -= q
-        theta = g[np.argmin(m, -1)]
+        best = np.argmin(m, -1)
+        theta, cs0 = g[best], (cs[0][best], cs[1][best])
     else:
-        theta = start
-    for _ in range(2):
-        step = np.clip(_newton_step(theta, o, d, od, r), -(hi - lo) / grid, (hi - lo) / grid)
+        theta, cs0 = start, start_cs
+    for i in range(2):
+        step = _newton_step(theta, o, d, od, r, cs0 if i == 0 else None)
+        step = np.clip(step, -(hi - lo) / grid, (hi - lo) / grid)
         theta = np.clip(theta - step, lo, hi)
     return theta
 
@@ -151,13 +157,14 @@ def residuals_and_geometry(
     theta: np.ndarray | None = None,
     theta_start: np.ndarray | None = None,
     grid: int = N_THETA_GRID,
+    start_cs: tuple[np.ndarray, np.ndarray] | None = None,
 ):
     """:func:`residuals` and the per-ray quantities behind them (``[o, d, cos θ, sin θ, a, b,
     qd]``), which :func:`edge_jacobian` at the same poses and angles reuses rather than
-    recomputes."""
+    recomputes; ``start_cs``: cos and sin of ``theta_start``."""
     o, d = _to_needle(T, rays)
     if theta is None:
-        theta = nearest_arc_angle(o, d, model, grid=grid, start=theta_start)
+        theta = nearest_arc_angle(o, d, model, grid=grid, start=theta_start, start_cs=start_cs)
     # _arc_f, keeping its intermediates.
     c, s = np.cos(theta), np.sin(theta)
     rad = model.radius

@@ -106,7 +106,7 @@ def levenberg_marquardt(
             break
         xn = x + delta
         Tn = params_to_pose(xn, cam, model)
-        rn, thn, geon = both(Tn, theta_start=theta)
+        rn, thn, geon = both(Tn, theta_start=theta, start_cs=(geo[2], geo[3]))
         cn = robust_cost(rn, sigma, colw, loss)
         better = cn < cost
         # The accepted rows' residual geometry, for the next Jacobian.
