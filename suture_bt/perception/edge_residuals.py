@@ -212,8 +212,8 @@ def edge_jacobian(
     inv = 1.0 / np.maximum(dist, 1e-12)
     along = (dist - model.wire_radius) / qd
     g = [k * (e[i] * inv - along * d[i]) for i in range(3)]
-    H = np.stack([g[i] * P[n] for i in range(3) for n in range(2)] + g, -1)  # (K, N, 9)
+    H = np.stack([g[i] * P[n] for i in range(3) for n in range(2)] + g, 1)  # (K, 9, N)
     R = T[:, :3, :3]
     A = np.einsum("kmi,kjmn->kjin", R, dT[..., :3, :2]).reshape(*dT.shape[:2], 6)
     b = np.einsum("kmi,kjm->kji", R, dT[..., :3, 3])
-    return np.concatenate([A, b], -1) @ H.transpose(0, 2, 1)
+    return np.concatenate([A, b], -1) @ H

@@ -17,6 +17,7 @@ from suture_bt.perception.needle_projection import params_to_pose
 #: Finite-difference steps of the six parameters (px, px, px, px, rad, rad) for the pose's
 #: derivatives and the extra terms' (the edge residuals' derivatives are analytic).
 FD_STEPS = np.array([0.02, 0.02, 0.02, 0.02, 2e-5, 2e-4])
+_DIAG = np.arange(len(FD_STEPS))
 
 #: Robust losses of the fit: Cauchy (outliers grow logarithmically; a wide basin for the
 #: search) and Geman-McClure (outliers cost a constant; the pose that explains the most edge
@@ -99,7 +100,10 @@ def levenberg_marquardt(
         A = Jw @ J.transpose(0, 2, 1)
         g = (Jw @ rr[..., None])[..., 0]
         diag = np.einsum("kii->ki", A) + 1e-9
-        Ad = A + lam[:, None, None] * np.einsum("ki,ij->kij", diag, np.eye(6))
+        # A + λ·diag(A) (+1e-9) on the diagonal: the same bits as adding λ·diag ⊗ I (the
+        # off-diagonal zeros add nothing).
+        Ad = A + 0.0
+        Ad[:, _DIAG, _DIAG] += lam[:, None] * diag
         try:
             delta = -np.linalg.solve(Ad, g[..., None])[..., 0]
         except np.linalg.LinAlgError:
