@@ -117,8 +117,8 @@ def levenberg_marquardt(
         if better.all():
             geo = geon
         else:
-            for g, gn in zip(geo, geon, strict=True):
-                g[..., better, :] = gn[..., better, :]
+            for kept, trial in zip(geo, geon, strict=True):
+                kept[..., better, :] = trial[..., better, :]
         x[better], T[better], r[better], theta[better], cost[better] = (
             xn[better],
             Tn[better],
