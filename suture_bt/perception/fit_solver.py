@@ -82,7 +82,8 @@ def levenberg_marquardt(
         pose's bits do not depend on its batch): (K, 4, 4), (K, 6, 4, 4), and the extra
         terms' residuals at the stepped poses (K, 6, M) (None without extra terms)."""
         P = params_to_pose(x[:, None, :] + _STEPS[None], cam, model)
-        E6 = extra_residuals(P[:, 1:].reshape(-1, 4, 4)).reshape(K, 6, -1) if extras else None
+        n_extra = len(colw) - n_edge
+        E6 = extra_residuals(P[:, 1:].reshape(-1, 4, 4)).reshape(K, 6, n_extra) if extras else None
         return np.ascontiguousarray(P[:, 0]), P[:, 1:], E6
 
     def both(T, *a, **k):
