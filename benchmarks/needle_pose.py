@@ -265,6 +265,8 @@ def _summary(rows: list[dict]) -> dict:
         ],
         "ms_per_stereo_frame": {k: float(v.mean()) for k, v in t.items()}
         | {"total_p95": float(np.percentile(t["total"], 95))},
+        # Per stage p95 (the tail a caller waits for is mostly the fit's).
+        "ms_per_stereo_frame_p95": {k: float(np.percentile(v, 95)) for k, v in t.items()},
     }
 
 

@@ -6,12 +6,20 @@ import numpy as np
 
 from suture_bt.geometry import NeedleModel
 from suture_bt.interfaces import StereoCameraModel
-from suture_bt.perception.edge_residuals import EdgeRays, edge_jacobian, residuals
+from suture_bt.perception.edge_residuals import (
+    EdgeRays,
+    edge_jacobian,
+    residuals,
+    residuals_and_geometry,
+)
 from suture_bt.perception.needle_projection import params_to_pose
 
 #: Finite-difference steps of the six parameters (px, px, px, px, rad, rad) for the pose's
 #: derivatives and the extra terms' (the edge residuals' derivatives are analytic).
 FD_STEPS = np.array([0.02, 0.02, 0.02, 0.02, 2e-5, 2e-4])
+_DIAG = np.arange(len(FD_STEPS))
+#: No step, then FD_STEPS in each parameter in turn (rows of a pose and its stepped poses).
+_STEPS = np.concatenate([np.zeros((1, 6)), np.diag(FD_STEPS)])
 
 #: Robust losses of the fit: Cauchy (outliers grow logarithmically; a wide basin for the
 #: search) and Geman-McClure (outliers cost a constant; the pose that explains the most edge
@@ -64,16 +72,28 @@ def levenberg_marquardt(
     cam = stereo.left
     extras = [e for e in (extra if isinstance(extra, list | tuple) else [extra]) if e]
     colw = np.concatenate([np.ones(len(rays))] + [e.column_weights(len(rays)) for e in extras])
+    K, n_edge = len(x), len(rays)
+
+    def extra_residuals(T):
+        return np.concatenate([e(T) for e in extras], 1)
+
+    def with_steps(x):
+        """Poses of x and of x stepped by FD_STEPS in each parameter, in one batch (each
+        pose's bits do not depend on its batch): (K, 4, 4), (K, 6, 4, 4), and the extra
+        terms' residuals at the stepped poses (K, 6, M) (None without extra terms)."""
+        P = params_to_pose(x[:, None, :] + _STEPS[None], cam, model)
+        n_extra = len(colw) - n_edge
+        E6 = extra_residuals(P[:, 1:].reshape(-1, 4, 4)).reshape(K, 6, n_extra) if extras else None
+        return np.ascontiguousarray(P[:, 0]), P[:, 1:], E6
 
     def both(T, *a, **k):
-        r, th = residuals(T, rays, model, *a, **k)
-        return (np.concatenate([r] + [e(T) for e in extras], 1) if extras else r), th
+        r, th, geo = residuals_and_geometry(T, rays, model, *a, **k)
+        return (np.concatenate([r, extra_residuals(T)], 1) if extras else r), th, geo
 
-    T = params_to_pose(x, cam, model)
-    r, theta = both(T)
+    T, T6, E6 = with_steps(x)
+    r, theta, geo = both(T)
     cost = robust_cost(r, sigma, colw, loss)
-    lam = np.full(len(x), 1e-2)
-    n_edge = len(rays)
+    lam = np.full(K, 1e-2)
     for _ in range(iters):
         ok = np.isfinite(cost)
         if not ok.any():
@@ -81,29 +101,41 @@ def levenberg_marquardt(
         w = colw * _irls_weights(r, sigma, loss)
         w = np.where(np.isfinite(w), w, 0.0)
         rr = np.where(np.isfinite(r), r, 0.0)
-        # Pose derivatives by finite differences (cheap: 6 poses per start), residual
-        # derivatives analytically for the edge points, by differences for the extra terms.
-        T6, dT = _pose_derivatives(x, T, cam, model)
-        J = edge_jacobian(T, dT, rays, model, theta)
+        # Pose derivatives by finite differences (cheap: 6 poses per start, made with the
+        # trial poses of the previous iteration), residual derivatives analytically for the
+        # edge points, by differences for the extra terms.
+        dT = (T6 - T[:, None]) / FD_STEPS[None, :, None, None]
+        J = edge_jacobian(T, dT, rays, model, theta, geo)
         if extras:
-            re = np.concatenate([e(T6.reshape(-1, 4, 4)) for e in extras], 1)
-            re = re.reshape(len(x), 6, -1) - rr[:, None, n_edge:]
+            re = E6 - rr[:, None, n_edge:]
             J = np.concatenate([J, re / FD_STEPS[None, :, None]], 2)
         J = np.where(np.isfinite(J), J, 0.0)
         Jw = J * w[:, None, :]
         A = Jw @ J.transpose(0, 2, 1)
         g = (Jw @ rr[..., None])[..., 0]
         diag = np.einsum("kii->ki", A) + 1e-9
-        Ad = A + lam[:, None, None] * np.einsum("ki,ij->kij", diag, np.eye(6))
+        # A + λ·diag(A) (+1e-9) on the diagonal: the same bits as adding λ·diag ⊗ I (the
+        # off-diagonal zeros add nothing).
+        Ad = A + 0.0
+        Ad[:, _DIAG, _DIAG] += lam[:, None] * diag
         try:
             delta = -np.linalg.solve(Ad, g[..., None])[..., 0]
         except np.linalg.LinAlgError:
             break
         xn = x + delta
-        Tn = params_to_pose(xn, cam, model)
-        rn, thn = both(Tn, theta_start=theta)
+        Tn, T6n, E6n = with_steps(xn)
+        rn, thn, geon = both(Tn, theta_start=theta, start_cs=(geo[2], geo[3]))
         cn = robust_cost(rn, sigma, colw, loss)
         better = cn < cost
+        # The accepted rows' residual geometry and stepped poses, for the next Jacobian.
+        if better.all():
+            geo, T6, E6 = geon, T6n, E6n
+        else:
+            for kept, trial in zip(geo, geon, strict=True):
+                kept[..., better, :] = trial[..., better, :]
+            T6 = np.where(better[:, None, None, None], T6n, T6)
+            if extras:
+                E6 = np.where(better[:, None, None], E6n, E6)
         x[better], T[better], r[better], theta[better], cost[better] = (
             xn[better],
             Tn[better],

@@ -61,33 +61,60 @@ def _needle_frame_basis(model: NeedleModel) -> tuple[np.ndarray, float, float]:
 
 
 def params_to_pose(params: np.ndarray, cam: CameraModel, model: NeedleModel) -> np.ndarray:
-    """Poses T_cam_needle (..., 4, 4) from parameters (..., 6); NaN where infeasible."""
+    """Poses T_cam_needle (..., 4, 4) from parameters (..., 6); NaN where infeasible.
+
+    Component by component (the fit calls this thousands of times on small batches, where
+    each numpy call's overhead dominates); the same arithmetic as :func:`pixel_rays`,
+    :func:`_unit` and :func:`_cross` in the same order, so the same bits.
+    """
     x = np.asarray(params, dtype=float)
     Bn, chord, h = _needle_frame_basis(model)
-    rb = pixel_rays(cam, x[..., 0:2])
-    rt = pixel_rays(cam, x[..., 2:4])
+    rb = _ray_components(cam, x[..., 0], x[..., 1])
+    rt = _ray_components(cam, x[..., 2], x[..., 3])
     phi, psi = x[..., 4], x[..., 5]
-    cg = np.clip(np.sum(rb * rt, -1), -1.0, 1.0)
+    cg = np.clip(rb[0] * rt[0] + rb[1] * rt[1] + rb[2] * rt[2], -1.0, 1.0)
     gamma = np.arccos(cg)
     sg = np.maximum(np.sin(gamma), 1e-9)
     s = chord * np.sin(gamma + phi) / sg
     t = chord * np.sin(phi) / sg
     bad = (s <= 0) | (t <= 0) | (phi <= 0)
-    B = s[..., None] * rb
-    T = t[..., None] * rt
-    e1 = _unit(T - B)
-    mid = 0.5 * (B + T)
-    n0 = _unit(_cross(e1, _unit(mid)))
-    n1 = _cross(e1, n0)
-    u = np.cos(psi)[..., None] * n0 + np.sin(psi)[..., None] * n1
-    Rc = np.stack([e1, u, _cross(e1, u)], -1)
-    R = Rc @ Bn.T
+    B = [s * rb[i] for i in range(3)]
+    T = [t * rt[i] for i in range(3)]
+    e1 = _unit3([T[i] - B[i] for i in range(3)])
+    mid = [0.5 * (B[i] + T[i]) for i in range(3)]
+    n0 = _unit3(_cross3(e1, _unit3(mid)))
+    n1 = _cross3(e1, n0)
+    cp, sp = np.cos(psi), np.sin(psi)
+    u = [cp * n0[i] + sp * n1[i] for i in range(3)]
+    w = _cross3(e1, u)
+    Rc = np.empty(x.shape[:-1] + (3, 3))
+    for i in range(3):
+        Rc[..., i, 0], Rc[..., i, 1], Rc[..., i, 2] = e1[i], u[i], w[i]
     out = np.zeros(x.shape[:-1] + (4, 4))
-    out[..., :3, :3] = R
-    out[..., :3, 3] = mid - h * u
+    out[..., :3, :3] = Rc @ Bn.T
+    for i in range(3):
+        out[..., i, 3] = mid[i] - h * u[i]
     out[..., 3, 3] = 1.0
     out[bad] = np.nan
     return out
+
+
+def _ray_components(cam: CameraModel, u: np.ndarray, v: np.ndarray) -> list[np.ndarray]:
+    """:func:`pixel_rays` as three component arrays (the same bits)."""
+    d0, d1 = (u - cam.cx) / cam.fx, (v - cam.cy) / cam.fy
+    n = np.sqrt(d0 * d0 + d1 * d1 + 1.0)
+    return [d0 / n, d1 / n, 1.0 / n]
+
+
+def _unit3(v: list[np.ndarray]) -> list[np.ndarray]:
+    """:func:`_unit` on three component arrays (the same bits)."""
+    n = np.sqrt(v[0] * v[0] + v[1] * v[1] + v[2] * v[2])
+    return [v[0] / n, v[1] / n, v[2] / n]
+
+
+def _cross3(a: list[np.ndarray], b: list[np.ndarray]) -> list[np.ndarray]:
+    """:func:`_cross` on three component arrays."""
+    return [a[1] * b[2] - a[2] * b[1], a[2] * b[0] - a[0] * b[2], a[0] * b[1] - a[1] * b[0]]
 
 
 def pose_to_params(T_cam_needle: np.ndarray, cam: CameraModel, model: NeedleModel) -> np.ndarray:

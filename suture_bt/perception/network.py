@@ -75,10 +75,33 @@ class NeedleNet(nn.Module):
         e2 = self.enc2(e1)
         e3 = self.enc3(e2)
         e4 = self.enc4(e3)
-        d3 = self.dec3(self.lat3(e3) + F.interpolate(e4, size=e3.shape[-2:], mode="nearest"))
-        d2 = self.dec2(self.lat2(e2) + F.interpolate(d3, size=e2.shape[-2:], mode="nearest"))
-        d1 = self.dec1(self.lat1(e1) + F.interpolate(d2, size=e1.shape[-2:], mode="nearest"))
+        d3 = self.dec3(_add_upsampled(self.lat3(e3), e4))
+        d2 = self.dec2(_add_upsampled(self.lat2(e2), d3))
+        d1 = self.dec1(_add_upsampled(self.lat1(e1), d2))
         return self.head(d1)
+
+
+def _add_upsampled(lat: torch.Tensor, x: torch.Tensor) -> torch.Tensor:
+    """``lat`` + ``x`` upsampled (nearest) to its size: the decoder's skip join.
+
+    Without autograd, channels-last and exactly twice the size (every join at the network's
+    input sizes), ``x`` is added in place through a broadcast view of ``lat``: the same sums
+    (the same bits) without the upsampled copy and a second output (on a CPU the join took a
+    third of the network's time).
+    """
+    B, C, H, W = lat.shape
+    h, w = x.shape[-2:]
+    cl = torch.channels_last
+    if (
+        torch.is_grad_enabled()
+        or (H, W) != (2 * h, 2 * w)
+        or not lat.is_contiguous(memory_format=cl)
+        or not x.is_contiguous(memory_format=cl)
+    ):
+        return lat + F.interpolate(x, size=(H, W), mode="nearest")
+    view = lat.permute(0, 2, 3, 1).view(B, h, 2, w, 2, C)
+    view += x.permute(0, 2, 3, 1)[:, :, None, :, None, :]
+    return lat
 
 
 def for_inference(net: NeedleNet) -> NeedleNet:
