@@ -77,12 +77,16 @@ class Handover(Skill):
         return float(np.max(np.abs(q_lift - q_grasp) / JOINT_VEL))
 
     def _seen_here(self, giver) -> np.ndarray | None:
-        """The giver's pose when the needle was last seen in its jaw there and it has not moved
-        since, the pinch standing as high above the tissue as a presentation's and the needle
-        clear of it (else None): the estimate is as good as a new look from that pose."""
+        """The calibrated giver's pose when the needle was last seen in its jaw there and it
+        has not moved since, the pinch standing as high above the tissue as a presentation's
+        and the needle clear of it (else None): the estimate is as good as a new look from that
+        pose. An uncalibrated giver's answer passed only a loose held-by test, so its handover
+        looks again (taken where seen, a dev trial's taker closed on a wrong first answer)."""
         ctx = self.context
         b = ctx.belief
-        if b is None or b.seen_at is None or b.seen_at[0] != self.giver or b.holder != self.giver:
+        if not giver.calibrated or b is None or b.seen_at is None:
+            return None
+        if b.seen_at[0] != self.giver or b.holder != self.giver:
             return None
         T_then, T_now = b.seen_at[1], giver.tip_world()
         moved = np.linalg.norm(T_now[:3, 3] - T_then[:3, 3])

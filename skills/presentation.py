@@ -15,8 +15,9 @@ whole circle on either side of the jaw; each moved by every tip displacement the
 bound allows an uncalibrated arm (at the Task 3 start up to about 20 mm: such an arm presents
 higher and beside the ridge). Safe poses that keep the needle in view under half those
 displacements come first (nearest point, then a believed needle facing the cameras, then least
-wrist bend), then other safe ones, then the rest, highest first. Everything is derived from the camera model, the port frames and the arm's
-joints, so a moved, rotated or tilted phantom works the same.
+wrist bend), then other safe ones, then the rest, highest first. Everything is derived from the
+camera model, the port frames and the arm's joints, so a moved, rotated or tilted phantom works
+the same.
 """
 
 from __future__ import annotations
