@@ -337,13 +337,13 @@ def test_one_wrong_answer_in_the_in_hand_check_is_refuted_by_a_second_look(sessi
     assert session.run_until(running(session, check, "bringing the needle")) is not None
     sensor = session.context.sensor
     real_observe, calls = sensor.observe, []
-    T_tip = GroundTruth(session.world).tip_pose_world("psm2")
 
     def observe(*args, **kwargs):
         obs = real_observe(*args, **kwargs)
         calls.append(obs)
         if len(calls) > 1:
             return obs
+        T_tip = GroundTruth(session.world).tip_pose_world("psm2")  # where the jaw is now
         pivot = T_tip[:3, 3] - 0.0015 * T_tip[:3, 2]
         R = Rotation.from_rotvec(np.deg2rad(40.0) * T_tip[:3, 1]).as_matrix()
         turn = make_transform(R, pivot - R @ pivot)
