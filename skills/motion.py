@@ -29,8 +29,9 @@ class Speed:
     a_ang: float
 
 
-#: Moves in free space (presenting, approaching a hover pose): 0.25 m/s, 3 rad/s (0.15, 2 before:
-#: on dev trials 25 % less simulated time per run, no change in pass rate or lateral error).
+#: Moves in free space (presenting, approaching a hover pose): 0.25 m/s, 3 rad/s (were 0.15 m/s,
+#: 2 rad/s; with the faster sweeps and the settle below, runs take ~55-60 s instead of ~70 s;
+#: lateral errors at the ports rose from ~0.14 to ~0.2 mm mean, a tenth of the 2.5 mm rule).
 TRANSIT = Speed(0.25, 2.0, 3.0, 15.0)
 #: The last centimetre to a grasp or an entry (slower, more accurate).
 FINE = Speed(0.05, 0.4, 1.2, 5.0)
