@@ -126,12 +126,21 @@ class Handover(Skill):
                 reason = f"{self.giver} could not back off from there"
             return reason
 
-        def choose_again() -> list[np.ndarray]:
-            return presentation.choose(ctx, giver, taker_can_reach, toward=taker)[0]
+        def choose_poses() -> tuple[list[np.ndarray], list[str]]:
+            # On the taker's side: it takes the needle without crossing the scene, and keeps it
+            # out of the way of what the giver does next; when no pose there will do (a moved,
+            # turned phantom: none in the giver's reach), on the giver's own side.
+            poses, why = presentation.choose(ctx, giver, taker_can_reach, toward=taker)
+            if not poses:
+                poses, why_own = presentation.choose(ctx, giver, taker_can_reach)
+                why = why + why_own
+                self.report["on_givers_side"] = bool(poses)
+            return poses, why
 
-        # On the taker's side: it takes the needle without crossing the scene, and keeps it
-        # out of the way of what the giver does next.
-        poses, why = presentation.choose(ctx, giver, taker_can_reach, toward=taker)
+        def choose_again() -> list[np.ndarray]:
+            return choose_poses()[0]
+
+        poses, why = choose_poses()
         if not poses:
             raise SkillFailure(
                 f"hand over: no pose where {self.giver} shows the needle and {self.taker} "

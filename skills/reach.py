@@ -4,9 +4,12 @@ For a port pair: the inserting arm, holding the needle at the grasp the pair nee
 the approach poses above the entry and every sampled pose of the insertion sweep; the pulling
 arm must reach the pulling grasp on the emerged needle and every sampled pose of the
 extraction. The answer is '' or one line naming the pair, the port and the arm, so a phantom
-placed out of reach ends the run before anything moves, with a reason a user can act on.
-The arms' kinematics are used as they are (before calibration the hidden offset of a few
-degrees moves the tip by millimetres; the per-pose skills check again as they go).
+placed out of reach ends the run before anything moves, with a reason a user can act on. The
+arms' kinematics are used as they are (before calibration the hidden offset of a few degrees
+moves the tip by millimetres; the per-pose skills check again as they go). The exit must also
+be in both cameras' view: the emerged tip is confirmed from images, and an insertion whose exit
+no camera sees could only be backed out of (through its exit: a stab), so such a pair is
+refused before anything moves.
 """
 
 from __future__ import annotations
@@ -21,6 +24,8 @@ from suture_bt.skills.motion import feasible
 
 #: Sweep poses checked per stage (the moves check every millimetre when they start).
 SAMPLES = 9
+#: Pixels the exit port keeps from the image border.
+VIEW_MARGIN_PX = 20
 
 
 def pair_reach(ctx: TaskContext, pair: int, inserter: str, puller: str) -> str:
@@ -42,4 +47,20 @@ def pair_reach(ctx: TaskContext, pair: int, inserter: str, puller: str) -> str:
     reason = feasible(ctx.arm(puller), [tip_goal(arc.needle_pose(p), T_pull) for p in phis])
     if reason:
         return f"pair {pair}: exit out of {puller.upper()}'s reach at {exit_.name} ({reason})"
+    return exit_out_of_view(ctx, pair, exit_)
+
+
+def exit_out_of_view(ctx: TaskContext, pair: int, exit_) -> str:
+    """'' when the exit port projects inside both images (``VIEW_MARGIN_PX`` to spare), else
+    which image it leaves. (The tip, driven on far past the exit, may leave the image: the
+    confirmation reads the emerged piece next to the exit.)"""
+    p = np.asarray(exit_.position, dtype=float)
+    for eye, cam in (("left", ctx.camera.model.left), ("right", ctx.camera.model.right)):
+        u, v = cam.project(p[None])[0]
+        m = VIEW_MARGIN_PX
+        if not (m <= u <= cam.width - m and m <= v <= cam.height - m):
+            return (
+                f"pair {pair}: {exit_.name} out of the {eye} camera's view (pixel {u:.0f}, "
+                f"{v:.0f} of {cam.width}×{cam.height}): the emerged tip could not be confirmed"
+            )
     return ""

@@ -55,3 +55,17 @@ def test_a_phantom_turned_away_puts_an_exit_out_of_psm1s_reach():
         assert why.startswith("pair 1: exit out of PSM1's reach at exit1"), why
     finally:
         world.close()
+
+
+def test_a_phantom_moved_toward_the_cameras_puts_the_first_exit_out_of_view():
+    # Moved 18 mm toward the cameras, 15 mm aside, 4 mm down, tilted 3° and turned -10°: the
+    # arms reach pair 1, but exit 1 falls below the images' bottom edge, where no look could
+    # confirm the emerged tip (the insertion was made, then backed out through the exit).
+    world, ctx = context_for({"position": [-0.015, 0.018, -0.004], "rpy": [0.0, 0.0524, -0.1745]})
+    try:
+        answers = [pair_reach(ctx, p, "psm2", "psm1") for p in (1, 2, 3, 4)]
+        assert answers[0].startswith("pair 1: exit1 out of the left camera's view"), answers[0]
+        assert "of 1920×1080" in answers[0]
+        assert answers[1:] == ["", "", ""]
+    finally:
+        world.close()
