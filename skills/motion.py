@@ -12,7 +12,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from suture_bt.kinematics import UnreachablePoseError, inverse_kinematics
+from suture_bt.kinematics import JOINT_LIMITS, UnreachablePoseError, inverse_kinematics
 from suture_bt.planning import CartesianMove, JointMove, PoseSequenceMove, TimedPoses, to_base
 from suture_bt.planning.needle_arc import in_base
 from suture_bt.skills.base import SkillFailure, Waiting
@@ -89,6 +89,14 @@ def feasible(arm: ArmHandle, goals_world, q_start=None) -> str:
         except UnreachablePoseError as e:
             return f"goal {i + 1}: {e.reason}"
     return ""
+
+
+def retract(clock, arm: ArmHandle, distance: float, what: str) -> Waiting:
+    """Draw the tool back ``distance`` along its shaft (the insertion joint alone, as far as its
+    limit allows): a retreat that is always in reach, whatever the wrist's joints are."""
+    q = arm.servo.setpoint_jp()
+    q[2] = max(q[2] - distance, JOINT_LIMITS[2, 0])
+    yield from _follow(clock, arm, JointMove(arm.servo, [q]), what)
 
 
 def follow_poses(clock, arm: ArmHandle, poses_world: TimedPoses, what: str) -> Waiting:

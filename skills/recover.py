@@ -1,7 +1,8 @@
 """Recovery skills the trees run between two attempts of a failed step.
 
 - :class:`OpenAndBackOff`: a grasp closed empty; the arm opens its jaw and backs off along its
-  jaws, so the next attempt comes in afresh.
+  jaws (or, where that pose is out of reach, draws back along its shaft), so the next attempt
+  comes in afresh.
 - :class:`BackOut`: an insertion was not confirmed; the inserting arm drives the needle back
   along the circle it came in on (the planned sweep reversed, from where the needle is now to
   the pre-insertion pose), then lifts it along the entry normal. The needle is rigid in the
@@ -18,7 +19,7 @@ from suture_bt.skills.base import Skill, SkillFailure, Waiting
 from suture_bt.skills.context import TaskContext
 from suture_bt.skills.grasps import backed_off
 from suture_bt.skills.insert import LIFT, PRE_ARC, SWEEP
-from suture_bt.skills.motion import follow_poses, jaw_to, move_to
+from suture_bt.skills.motion import feasible, follow_poses, jaw_to, move_to, retract
 
 #: Jaw opening and back-off distance along the jaws after an empty close (rad, m).
 JAW_OPEN, BACK_OFF = 0.8, 0.010
@@ -41,6 +42,12 @@ class OpenAndBackOff(Skill):
         self.say(f"{self.arm_name} opens its jaw")
         yield from jaw_to(arm, JAW_OPEN)
         T_back = backed_off(arm.commanded_tip_world(), self.distance)
+        why = feasible(arm, [T_back])
+        if why:  # e.g. the wrist at its limit (a campaign trial's taker ended the run here)
+            self.report["retracted_instead"] = why
+            yield from retract(self.context.clock, arm, self.distance, "draw back")
+            self.say(f"{self.arm_name} opened and drew back {1e3 * self.distance:.0f} mm")
+            return
         yield from move_to(self.context.clock, arm, [T_back], "back off")
         self.say(f"{self.arm_name} opened and backed off {1e3 * self.distance:.0f} mm")
 
