@@ -12,9 +12,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from suture_bt.geometry.tissue_surface import height_above_tissue
 from suture_bt.kinematics import UnreachablePoseError, inverse_kinematics
-from suture_bt.perception.in_hand import JAW_POINT_IN_TIP
 from suture_bt.planning import NeedleArcError, plan_needle_arc, to_base
 from suture_bt.planning.trajectory import JOINT_VEL
 from suture_bt.skills import checks, presentation
@@ -94,12 +92,7 @@ class Handover(Skill):
         if moved > STILL_POSITION or turned > STILL_ANGLE_DEG:
             return None
         T_here = giver.commanded_tip_world()
-        pinch = T_here[:3, :3] @ JAW_POINT_IN_TIP + T_here[:3, 3]
-        if height_above_tissue(ctx.phantom, pinch[None])[0] < presentation.MIN_PINCH_CLEARANCE:
-            return None
-        if presentation.needle_clearance(ctx, giver, T_here) < presentation.MIN_NEEDLE_CLEARANCE:
-            return None
-        return T_here
+        return T_here if presentation.safe_to_present(ctx, giver, T_here) else None
 
     def program(self) -> Waiting:
         ctx = self.context
@@ -175,15 +168,15 @@ class Handover(Skill):
                 yield from together(present, move_to(ctx.clock, taker, [wait_at], "come closer"))
             else:
                 yield from present
-            look = LocalizeNeedle(ctx, self.giver, present=False)
-            try:
-                if not here:
+            if not here:
+                look = LocalizeNeedle(ctx, self.giver, present=False)
+                try:
                     yield from self.run(look)
-            except SkillFailure as e:
-                self.report.setdefault("refusals", []).append(e.reason)
-                if look.narrow_offsets(giver):  # not seen at all: present it elsewhere
-                    poses = presentation.untried(choose_again(), tried)
-                continue
+                except SkillFailure as e:
+                    self.report.setdefault("refusals", []).append(e.reason)
+                    if look.narrow_offsets(giver):  # not seen at all: present it elsewhere
+                        poses = presentation.untried(choose_again(), tried)
+                    continue
             # Reachability again, now from the fresh estimate (the prediction used to choose
             # the pose carries the giver's in-hand error).
             T_needle = ctx.belief.T_world_needle.copy()

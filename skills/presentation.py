@@ -170,6 +170,16 @@ def in_view(ctx: TaskContext, points_world: np.ndarray) -> bool:
     return True
 
 
+def safe_to_present(ctx: TaskContext, arm: ArmHandle, T_tip: np.ndarray) -> bool:
+    """Whether the jaw at ``T_tip`` stands as a presentation must: its pinch point
+    ``MIN_PINCH_CLEARANCE`` above the tissue under it and every place the held needle may be
+    (with the arm's offset displacements) ``MIN_NEEDLE_CLEARANCE`` above it."""
+    pinch = T_tip[:3, 3] - GRASP_DEPTH * T_tip[:3, 2]
+    if height_above_tissue(ctx.phantom, pinch[None])[0] < MIN_PINCH_CLEARANCE:
+        return False
+    return needle_clearance(ctx, arm, T_tip) >= MIN_NEEDLE_CLEARANCE
+
+
 def face_on(ctx: TaskContext, arm: ArmHandle, T_tip: np.ndarray) -> bool:
     """Whether the believed needle at this jaw pose faces the left camera within
     ``FACE_ON_DEG`` (True when the in-hand pose is not known: nothing to prefer)."""
