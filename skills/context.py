@@ -111,6 +111,9 @@ class NeedleBelief:
     #: (holder, its tip pose in the world) when this estimate was adopted: while that arm has
     #: not moved, the estimate is as fresh as a new look (uncalibrated arms included).
     seen_at: tuple[str, np.ndarray] | None = None
+    #: Two views from different poses of an uncalibrated holder agreed on this estimate
+    #: (:mod:`~suture_bt.skills.second_view`); a calibrated holder's needs no second view.
+    confirmed: bool = False
 
 
 @dataclass

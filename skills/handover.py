@@ -75,14 +75,14 @@ class Handover(Skill):
         return float(np.max(np.abs(q_lift - q_grasp) / JOINT_VEL))
 
     def _seen_here(self, giver) -> np.ndarray | None:
-        """The calibrated giver's pose when the needle was last seen in its jaw there and it
-        has not moved since, the pinch standing as high above the tissue as a presentation's
-        and the needle clear of it (else None): the estimate is as good as a new look from that
-        pose. An uncalibrated giver's answer passed only a loose held-by test, so its handover
-        looks again (taken where seen, a dev trial's taker closed on a wrong first answer)."""
+        """The giver's pose when the needle was last seen in its jaw there and it has not moved
+        since, the pinch standing as high above the tissue as a presentation's and the needle
+        clear of it (else None): the estimate is as good as a new look from that pose. An
+        uncalibrated giver's estimate counts only when two views agreed on it (one answer
+        passes only a loose held-by test: a dev trial's taker closed on a wrong first one)."""
         ctx = self.context
         b = ctx.belief
-        if not giver.calibrated or b is None or b.seen_at is None:
+        if b is None or b.seen_at is None or not (giver.calibrated or b.confirmed):
             return None
         if b.seen_at[0] != self.giver or b.holder != self.giver:
             return None
@@ -149,6 +149,7 @@ class Handover(Skill):
         self.say(f"{self.giver} presents the needle for {self.taker}")
         taker.arm.jaw.move_jp(np.array([JAW_OPEN]))  # opens while the giver presents
         tried: list[np.ndarray] = []
+        earlier: list = []  # an uncalibrated giver's unconfirmed answers, shared by its looks
         while poses and len(tried) < presentation.CHOSEN:
             T = poses.pop(0)
             tried.append(T)
@@ -169,7 +170,7 @@ class Handover(Skill):
             else:
                 yield from present
             if not here:
-                look = LocalizeNeedle(ctx, self.giver, present=False)
+                look = LocalizeNeedle(ctx, self.giver, present=False, earlier=earlier)
                 try:
                     yield from self.run(look)
                 except SkillFailure as e:

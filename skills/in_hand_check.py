@@ -31,6 +31,7 @@ from suture_bt.skills.insert import LIFT, PRE_ARC, approach_path
 from suture_bt.skills.line_of_sight import make_way
 from suture_bt.skills.localize_needle import LocalizeNeedle
 from suture_bt.skills.motion import feasible, move_to, together
+from suture_bt.skills.needle_sensor import in_working_range
 from suture_bt.transforms import invert, rotation_angle
 
 #: A calibrated arm whose held wire is seen this far from its pinch point, and the needle this
@@ -146,6 +147,8 @@ class CheckInHand(Skill):
         ctx = self.context
         yield from self._rise()
         for present in (False, True):  # risen, else presented to the cameras
+            if not present and not in_working_range(ctx.camera, ctx.predicted_needle()):
+                continue
             try:
                 yield from self.run(LocalizeNeedle(ctx, self.arm_name, present=present))
                 break
@@ -180,6 +183,11 @@ class CheckInHand(Skill):
         for i, present in enumerate((False, False, True)):
             if i == 1:  # a second view, risen from the entry, before presenting it
                 yield from self._rise()
+            if not present and not in_working_range(ctx.camera, ctx.predicted_needle()):
+                self.report.setdefault("skipped_looks", []).append(
+                    "needle nearer the cameras than the localiser's range"
+                )
+                continue
             look = LocalizeNeedle(ctx, self.arm_name, present=present)
             try:
                 yield from self.run(look)

@@ -13,11 +13,11 @@ from __future__ import annotations
 import numpy as np
 
 from suture_bt.perception.in_hand import estimate_in_hand
-from suture_bt.skills import presentation
+from suture_bt.skills import presentation, second_view
 from suture_bt.skills.base import Skill, SkillFailure, Waiting
 from suture_bt.skills.context import NeedleNotSeen, NeedleObservation, TaskContext
 from suture_bt.skills.line_of_sight import make_way
-from suture_bt.skills.motion import move_to, together
+from suture_bt.skills.motion import move_joints, move_to, together
 from suture_bt.skills.offset_evidence import offset_grid, unseen_offsets
 from suture_bt.skills.tip_uncertainty import worst_offset_displacement
 
@@ -34,6 +34,8 @@ MAX_PRESENTATIONS = 7
 #: pose (whole circle). A confidently wrong first estimate (a twin sharing the tip, seen on
 #: a campaign trial: 24 mm off at the base) otherwise aims every presentation wrongly.
 DOUBT_AFTER = 3
+#: Wrist turns for more views of an uncalibrated holder's needle, per presentation.
+MAX_TURNS = 2
 #: A presentation whose pinch point is this close to an avoided pose's counts as the same view.
 AVOID_RADIUS = 0.008
 
@@ -49,8 +51,15 @@ class LocalizeNeedle(Skill):
         holder: str | None = None,
         present: bool = True,
         avoid: tuple[np.ndarray, ...] = (),
+        earlier: list | None = None,
     ):
         super().__init__(context)
+        #: Unconfirmed answers for an uncalibrated holder, (measured joints, T_world_needle):
+        #: a later answer that agrees with one of them is confirmed. A caller that looks
+        #: several times (the handover) passes one list to all its looks.
+        self.earlier: list = [] if earlier is None else earlier
+        #: Whether the adopted answer was confirmed by a second view (uncalibrated holder).
+        self.confirmed = False
         self.holder = holder
         self.present = present
         #: Presentation poses not to use (a caller's second opinion wants another view).
@@ -61,7 +70,7 @@ class LocalizeNeedle(Skill):
         ctx = self.context
         reasons: list[str] = []
         if self.holder is None or not self.present:  # look from where it is
-            obs = self._look(reasons)
+            obs = yield from self._look_twice(reasons)
             if obs is None:
                 where = f"held by {self.holder} " if self.holder else ""
                 raise SkillFailure(f"needle {where}not localised: {'; '.join(reasons)}")
@@ -82,7 +91,7 @@ class LocalizeNeedle(Skill):
                 ctx.clock, arm, presentation.lifted_first(ctx, arm, T), "present the needle"
             )
             yield from together(present, *make_way(ctx, self._target(T), self.holder))
-            obs = self._look(reasons)
+            obs = yield from self._look_twice(reasons)
             if obs is not None:
                 self._adopt(obs)
                 return
@@ -123,12 +132,68 @@ class LocalizeNeedle(Skill):
             return (T_present @ b.T_tip_needle)[:3, 3]
         return T_present[:3, 3]
 
-    def _look(self, reasons: list[str]) -> NeedleObservation | None:
+    def _look_twice(self, reasons: list[str]) -> Waiting:
+        """A look; for a needle held by an uncalibrated arm, an answer only when two views from
+        different holder poses agree (:mod:`second_view`): an earlier answer of this skill (or
+        of the caller's ``earlier``) carried to this pose, else another view after a wrist
+        turn (up to ``MAX_TURNS``). Returns the agreeing answer, or None (``reasons`` says
+        why). Each view is answered on its own: a prior from the first would pull the second
+        toward a twin."""
+        obs = self._look(reasons)
+        arm = None if self.holder is None else self.context.arm(self.holder)
+        if obs is None or arm is None or arm.calibrated:
+            return obs
+        q = np.asarray(arm.arm.measured_jp(), dtype=float)
+        skip = 0
+        for _ in range(MAX_TURNS + 1):
+            if obs is not None:
+                if self._agrees_with_earlier(arm, q, obs):
+                    return obs
+                self.earlier.append((q, obs.T_world_needle.copy()))
+                T_last = obs.T_world_needle
+            turn = second_view.wrist_turn(self.context, arm, q, T_last, skip)
+            if turn is None:
+                break
+            q_turn, k = turn
+            skip = k + 1
+            yield from move_joints(self.context.clock, arm, q_turn, "turn the wrist: another view")
+            q = np.asarray(arm.arm.measured_jp(), dtype=float)
+            obs = self._look(reasons)
+        reasons.append(f"answer not confirmed by a second view of {arm.name}'s needle")
+        return None
+
+    def _agrees_with_earlier(self, arm, q_now: np.ndarray, obs: NeedleObservation) -> bool:
+        """Whether ``obs`` (at measured joints ``q_now``) is an earlier answer carried to here
+        for some offset the arm may have; recorded as a check either way when there are any."""
+        if not self.earlier:
+            return False
+        details = []
+        for q_then, T_then in self.earlier:
+            ok, detail, _ = second_view.agree_under_some_offset(
+                arm, q_then, q_now, T_then, obs.T_world_needle
+            )
+            if ok:
+                self.confirmed = True
+                self.report["checks"].append(
+                    {"check": "two views agree", "ok": True, "detail": detail}
+                )
+                return True
+            details.append(detail)
+        self.report["checks"].append(
+            {"check": "two views agree", "ok": False, "detail": details[-1]}
+        )
+        self.report.setdefault("refusals", []).append(f"two views disagree: {details[-1]}")
+        return False
+
+    def _look(
+        self, reasons: list[str], predicted: np.ndarray | None = None
+    ) -> NeedleObservation | None:
+        """Capture and localise; ``predicted`` (world) makes it a prior-checked look."""
         ctx = self.context
-        previous = ctx.predicted_needle()
+        previous = ctx.predicted_needle() if predicted is None else predicted
         self._unseen_eye = None
         try:
-            obs = ctx.sensor.observe(previous)
+            obs = ctx.sensor.observe(previous, prior_checked=predicted is not None)
         except NeedleNotSeen as e:
             self._unseen_eye = getattr(e, "unseen_eye", None)
             reasons.append(e.reason)
@@ -162,6 +227,7 @@ class LocalizeNeedle(Skill):
 
     def _adopt(self, obs: NeedleObservation) -> None:
         belief = self.context.believe(obs, self.holder)
+        belief.confirmed = self.confirmed
         self.report["estimate"] = {
             "T_world_needle": obs.T_world_needle.tolist(),
             "angle_std_deg": obs.angle_std_deg,

@@ -99,6 +99,11 @@ def retract(clock, arm: ArmHandle, distance: float, what: str) -> Waiting:
     yield from _follow(clock, arm, JointMove(arm.servo, [q]), what)
 
 
+def move_joints(clock, arm: ArmHandle, q_goal: np.ndarray, what: str) -> Waiting:
+    """Move the arm to joint set-points ``q_goal`` (joint space), then settle."""
+    yield from _follow(clock, arm, JointMove(arm.servo, [np.asarray(q_goal, dtype=float)]), what)
+
+
 def follow_poses(clock, arm: ArmHandle, poses_world: TimedPoses, what: str) -> Waiting:
     """Follow planner-timed tip poses (world), e.g. a needle sweep, then settle."""
     timed = in_base(poses_world, arm.base_frame())

@@ -23,7 +23,7 @@ import numpy as np
 from suture_bt.interfaces import FrameLost, StereoCameraInterface
 from suture_bt.perception.arc_evidence import arc_hits, metal_masks
 from suture_bt.perception.in_hand import JAW_POINT_IN_TIP
-from suture_bt.perception.needle_localizer import NeedleLocalizer
+from suture_bt.perception.needle_localizer import MIN_DEPTH, NeedleLocalizer
 from suture_bt.perception.needle_prior import HeldPrior, NeedlePrior, PredictedPosePrior
 from suture_bt.perception.pose_fit import NeedleNotFound
 from suture_bt.skills.checks import AGREE_ANGLE_DEG, AGREE_POSITION
@@ -41,6 +41,19 @@ DARK_SHARE = 0.6
 #: gives: a few mm while its joint offset is uncalibrated (the default), sub-mm once it is.
 HELD_TOLERANCE = 0.004
 HELD_TOLERANCE_CALIBRATED = 0.001
+#: A needle whose centre is predicted nearer the left camera than the localiser's floor
+#: (``MIN_DEPTH``) plus this (m) is not worth a look: the localiser refuses it (measured: the
+#: in-hand check's views 28 and 44 mm away were refused on every pair that had them).
+RANGE_MARGIN = 0.003
+
+
+def in_working_range(camera: StereoCameraInterface, T_world_needle: np.ndarray | None) -> bool:
+    """Whether a needle predicted at ``T_world_needle`` (None: unknown, True) lies beyond the
+    localiser's near floor in front of the left camera."""
+    if T_world_needle is None:
+        return True
+    centre = camera.model.left.to_camera(np.asarray(T_world_needle)[:3, 3][None])[0]
+    return bool(centre[2] >= MIN_DEPTH + RANGE_MARGIN)
 
 
 def brightness(frame) -> float:
