@@ -18,7 +18,7 @@ from suture_bt.skills.context import NeedleNotSeen, TaskContext
 from suture_bt.skills.grasps import backed_off, pulling_hand, tip_goal
 from suture_bt.skills.insert import SWEEP
 from suture_bt.skills.localize_needle import LocalizeNeedle
-from suture_bt.skills.motion import FINE, follow_poses, jaw_to, move_to
+from suture_bt.skills.motion import FINE, follow_poses, jaw_to, let_go, move_to
 
 #: Approach along the jaws, the inserter's back-off and the lift after extraction (m).
 APPROACH, BACK_OFF, LIFT = 0.008, 0.010, 0.012
@@ -54,7 +54,7 @@ class Extract(Skill):
         yield from jaw_to(puller, 0.0)
         self.check(f"needle in {self.puller}'s jaw", *checks.jaw_holds_wire(puller.jaw_angle()))
         self.say(f"{where}: {self.inserter} lets go")
-        yield from jaw_to(inserter, JAW_OPEN)
+        yield from let_go(inserter, JAW_OPEN)
         yield from move_to(
             ctx.clock, inserter, [backed_off(inserter.commanded_tip_world(), BACK_OFF)], "back off"
         )

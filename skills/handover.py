@@ -22,7 +22,7 @@ from suture_bt.skills.grasps import backed_off, hand, held_arc_angle, tip_goal
 from suture_bt.skills.insert import LIFT, PRE_ARC
 from suture_bt.skills.line_of_sight import clear_tip_pose
 from suture_bt.skills.localize_needle import LocalizeNeedle
-from suture_bt.skills.motion import FINE, feasible, jaw_to, move_to, together
+from suture_bt.skills.motion import FINE, feasible, jaw_to, let_go, move_to, together
 from suture_bt.transforms import rotation_angle
 
 #: The taker comes in along its jaws from this far back (m); the giver backs off as far.
@@ -200,7 +200,7 @@ class Handover(Skill):
         yield from jaw_to(taker, 0.0)
         self.check(f"needle in {self.taker}'s jaw", *checks.jaw_holds_wire(taker.jaw_angle()))
         self.say(f"{self.giver} lets go")
-        yield from jaw_to(giver, JAW_OPEN)
+        yield from let_go(giver, JAW_OPEN)
         T_back = backed_off(giver.commanded_tip_world(), APPROACH)
         yield from move_to(ctx.clock, giver, [T_back], "back off")
         # The needle has not moved: re-anchor the estimate to the taker's gripper, then look

@@ -34,6 +34,12 @@ MAX_PRESENTATIONS = 7
 #: pose (whole circle). A confidently wrong first estimate (a twin sharing the tip, seen on
 #: a campaign trial: 24 mm off at the base) otherwise aims every presentation wrongly.
 DOUBT_AFTER = 3
+#: A needle driver holds the needle with its jaws across the needle plane (every grasp of the
+#: task: the plane's normal along the tip's z axis); an uncalibrated arm's tip is turned by
+#: up to ~7° by its hidden offset and a slip tilts the needle by up to 10° (harsh profile).
+#: The localiser's confident twins at the Task 3 start had their plane 39-45° off (dev trial
+#: 8130007): they passed the loose held-by test of an uncalibrated arm, not this one (deg).
+ACROSS_JAWS_DEG = 20.0
 #: Wrist turns for more views of an uncalibrated holder's needle, per presentation.
 MAX_TURNS = 2
 #: A presentation whose pinch point is this close to an avoided pose's counts as the same view.
@@ -145,12 +151,14 @@ class LocalizeNeedle(Skill):
             return obs
         q = np.asarray(arm.arm.measured_jp(), dtype=float)
         skip = 0
-        for _ in range(MAX_TURNS + 1):
+        for turns in range(MAX_TURNS + 1):
             if obs is not None:
                 if self._agrees_with_earlier(arm, q, obs):
                     return obs
                 self.earlier.append((q, obs.T_world_needle.copy()))
                 T_last = obs.T_world_needle
+            if turns == MAX_TURNS:
+                break
             turn = second_view.wrist_turn(self.context, arm, q, T_last, skip)
             if turn is None:
                 break
@@ -223,6 +231,19 @@ class LocalizeNeedle(Skill):
             if not ok:
                 reasons.append(f"answer disagrees with the grasp: {detail}")
                 return None
+            if not arm.calibrated:
+                tilt = across_jaws_deg(obs.T_world_needle, tip)
+                ok = tilt <= ACROSS_JAWS_DEG
+                detail = (
+                    f"needle plane {tilt:.0f}° from across {arm.name}'s jaws "
+                    f"(limit {ACROSS_JAWS_DEG:.0f}°)"
+                )
+                self.report["checks"].append(
+                    {"check": "across the jaws", "ok": ok, "detail": detail}
+                )
+                if not ok:
+                    reasons.append(f"answer disagrees with the grasp: {detail}")
+                    return None
         return obs
 
     def _adopt(self, obs: NeedleObservation) -> None:
@@ -240,3 +261,9 @@ class LocalizeNeedle(Skill):
             f"needle {where} at {np.round(1e3 * belief.T_world_needle[:3, 3], 1)} mm "
             f"(spread {obs.angle_std_deg:.2f}°)"
         )
+
+
+def across_jaws_deg(T_world_needle: np.ndarray, T_world_tip: np.ndarray) -> float:
+    """Angle (deg) between the needle plane's normal and the jaw's tip z axis (either sign)."""
+    cos = abs(float(T_world_needle[:3, 2] @ T_world_tip[:3, 2]))
+    return float(np.degrees(np.arccos(min(cos, 1.0))))

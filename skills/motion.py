@@ -41,6 +41,10 @@ SETTLE_S = 0.10
 #: Per joint, the most a still arm's measured joints move in one tick (rad; m for joint 3):
 #: 0.01° and 5 µm, far below what the tip's 0.1 mm accuracy needs.
 STILL = np.array([1.7e-4, 1.7e-4, 5e-6, 1.7e-4, 1.7e-4, 1.7e-4])
+#: A jaw has let go of the wire once open this far (rad): the blades then stand about 3.5 mm
+#: apart where they held the 0.72 mm wire, and the arm can back off while it opens further
+#: (waiting for the full 0.8 rad cost about 0.2 s per release, ten releases per run).
+RELEASE_OPEN = 0.4
 #: The jaw has stopped when its measured angle changes less than this per tick (rad).
 JAW_STILL = 1e-4
 
@@ -147,6 +151,13 @@ def jaw_to(arm: ArmHandle, angle: float) -> Waiting:
         if not arm.arm.jaw.is_busy() and previous is not None and abs(now - previous) < JAW_STILL:
             return
         previous = now
+
+
+def let_go(arm: ArmHandle, open_to: float) -> Waiting:
+    """Open the jaw until the wire is free (``RELEASE_OPEN``), then go on opening to
+    ``open_to`` without waiting: the arm can back off meanwhile."""
+    yield from jaw_to(arm, min(RELEASE_OPEN, open_to))
+    arm.arm.jaw.move_jp(np.array([open_to]))
 
 
 def together(*motions: Waiting) -> Waiting:
