@@ -12,10 +12,14 @@ from __future__ import annotations
 
 import numpy as np
 
+from suture_bt.calibration.calibration_pose import offset_box_points
+from suture_bt.kinematics import UnreachablePoseError, inverse_kinematics
 from suture_bt.perception.in_hand import estimate_in_hand
+from suture_bt.planning import to_base
 from suture_bt.skills import presentation, second_view
 from suture_bt.skills.base import Skill, SkillFailure, Waiting
 from suture_bt.skills.context import NeedleNotSeen, NeedleObservation, TaskContext
+from suture_bt.skills.grasp_offset import offset_from_grasp
 from suture_bt.skills.line_of_sight import make_way
 from suture_bt.skills.motion import move_joints, move_to, together
 from suture_bt.skills.offset_evidence import offset_grid, unseen_offsets
@@ -40,6 +44,9 @@ DOUBT_AFTER = 3
 #: The localiser's confident twins at the Task 3 start had their plane 39-45° off (dev trial
 #: 8130007): they passed the loose held-by test of an uncalibrated arm, not this one (deg).
 ACROSS_JAWS_DEG = 20.0
+#: Share of the offset bound still possible around a provisional offset from the grasp
+#: (dev fits with 0.2 mm / 1° estimate noise: within 0.2° and 0.2 mm of the true offset).
+PROVISIONAL_SHARE = 0.4
 #: Wrist turns for more views of an uncalibrated holder's needle, per presentation.
 MAX_TURNS = 2
 #: A presentation whose pinch point is this close to an avoided pose's counts as the same view.
@@ -75,6 +82,7 @@ class LocalizeNeedle(Skill):
     def program(self) -> Waiting:
         ctx = self.context
         reasons: list[str] = []
+        self._earlier_from_belief()
         if self.holder is None or not self.present:  # look from where it is
             obs = yield from self._look_twice(reasons)
             if obs is None:
@@ -149,7 +157,7 @@ class LocalizeNeedle(Skill):
         arm = None if self.holder is None else self.context.arm(self.holder)
         if obs is None or arm is None or arm.calibrated:
             return obs
-        q = np.asarray(arm.arm.measured_jp(), dtype=float)
+        q = arm.servo.estimated_jp()
         skip = 0
         for turns in range(MAX_TURNS + 1):
             if obs is not None:
@@ -165,10 +173,28 @@ class LocalizeNeedle(Skill):
             q_turn, k = turn
             skip = k + 1
             yield from move_joints(self.context.clock, arm, q_turn, "turn the wrist: another view")
-            q = np.asarray(arm.arm.measured_jp(), dtype=float)
+            q = arm.servo.estimated_jp()
             obs = self._look(reasons)
         reasons.append(f"answer not confirmed by a second view of {arm.name}'s needle")
         return None
+
+    def _earlier_from_belief(self) -> None:
+        """An estimate two views already agreed on, of the needle in this (uncalibrated)
+        holder's jaw, counts as an earlier view: a new answer that agrees with it carried to
+        the new pose is confirmed without a wrist turn."""
+        b = self.context.belief
+        if self.holder is None or b is None or not b.confirmed or b.holder != self.holder:
+            return
+        arm = self.context.arm(self.holder)
+        if arm.calibrated or b.seen_at is None or b.seen_at[0] != self.holder:
+            return
+        try:
+            q_seen = inverse_kinematics(
+                to_base(b.seen_at[1], arm.base_frame()), arm.servo.setpoint_jp()
+            )
+        except UnreachablePoseError:
+            return
+        self.earlier.append((q_seen, b.T_world_needle.copy()))
 
     def _agrees_with_earlier(self, arm, q_now: np.ndarray, obs: NeedleObservation) -> bool:
         """Whether ``obs`` (at measured joints ``q_now``) is an earlier answer carried to here
@@ -192,6 +218,25 @@ class LocalizeNeedle(Skill):
         )
         self.report.setdefault("refusals", []).append(f"two views disagree: {details[-1]}")
         return False
+
+    def _offset_from_grasp(self, obs: NeedleObservation) -> None:
+        """A confirmed estimate of an uncalibrated holder's needle: the offset that puts its
+        jaw on the needle as the task's grasps hold it becomes a provisional Δq̂ in its servo
+        (the arm stays put; the keypoint calibration replaces it), and the offsets still
+        possible shrink to ``PROVISIONAL_SHARE`` of the bound around it."""
+        arm = self.context.arm(self.holder)
+        found = offset_from_grasp(
+            arm.base_frame(), arm.servo.estimated_jp(), obs.T_world_needle, self.context.needle
+        )
+        if found is None:
+            self.report["offset_from_grasp"] = "no offset within the bound explains the grasp"
+            return
+        total = np.asarray(arm.servo.offset_estimate, dtype=float)[:3] + found.offset
+        arm.servo.set_offset_estimate(total, hold_pose=True)
+        arm.offset_estimate = total.copy()
+        arm.possible_offsets = offset_box_points(3) * PROVISIONAL_SHARE
+        self.report["offset_from_grasp"] = found.summary()
+        self.say(f"{arm.name}: provisional offset from its grasp: {found.summary()}")
 
     def _look(
         self, reasons: list[str], predicted: np.ndarray | None = None
@@ -247,6 +292,8 @@ class LocalizeNeedle(Skill):
         return obs
 
     def _adopt(self, obs: NeedleObservation) -> None:
+        if self.confirmed:
+            self._offset_from_grasp(obs)
         belief = self.context.believe(obs, self.holder)
         belief.confirmed = self.confirmed
         self.report["estimate"] = {

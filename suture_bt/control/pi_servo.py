@@ -174,9 +174,14 @@ class PIServo:
         """Estimate of the TRUE joints: measured + Δq̂."""
         return true_from_measured(self.arm.measured_jp(), self.offset_estimate)
 
-    def set_offset_estimate(self, offset) -> None:
-        """Use a new Δq̂ (joints 1-3); the integrator is kept (it models the load, not Δq)."""
-        self.offset_estimate = full_offset(offset)
+    def set_offset_estimate(self, offset, hold_pose: bool = False) -> None:
+        """Use a new Δq̂ (joints 1-3); the integrator is kept (it models the load, not Δq).
+        ``hold_pose``: the desired joints move with the estimate, so the arm stays where it is
+        (a provisional estimate installed while the arm holds something)."""
+        new = full_offset(offset)
+        if hold_pose and self.desired is not None:
+            self.desired = self.desired + (new - self.offset_estimate)
+        self.offset_estimate = new
 
     def reset(self, hold_current: bool = True) -> None:
         """Zero the integrator; optionally make the current estimate the desired value."""
