@@ -12,6 +12,7 @@ from suture_bt.geometry import NeedleModel, PhantomModel
 from suture_bt.skills import localize_needle
 from suture_bt.skills.base import SkillStatus
 from suture_bt.skills.context import NeedleBelief, NeedleObservation, TaskContext
+from suture_bt.skills.grasps import hand
 from suture_bt.skills.localize_needle import (
     ACROSS_JAWS_DEG,
     DOUBT_AFTER,
@@ -120,6 +121,14 @@ def test_an_uncalibrated_holders_twin_is_not_adopted_until_two_views_agree(monke
 
     truth_now = carried(ctx.arm("psm2"), q0, ctx.arm("psm2").arm.q, poses["true"], TRUE_OFFSET)
     np.testing.assert_allclose(ctx.belief.T_world_needle, truth_now, atol=1e-9)
+    # The confirmed estimate fixes the jaw: the provisional offset is the arm's hidden one,
+    # and the in-hand pose is the grasp the needle is held with (150°, jaws across it).
+    arm = ctx.arm("psm2")
+    np.testing.assert_allclose(arm.offset_estimate, TRUE_OFFSET, atol=1e-6)
+    assert not arm.calibrated and "grasp at 150°" in skill.report["offset_from_grasp"]
+    np.testing.assert_allclose(
+        ctx.belief.T_tip_needle, hand(ctx.needle, np.deg2rad(150.0)), atol=1e-6
+    )
 
 
 def test_views_that_never_agree_end_in_a_refusal_with_the_reason(monkeypatch):

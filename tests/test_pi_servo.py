@@ -319,3 +319,24 @@ def test_plant_estimate_converges_to_slow_and_fast_plants_from_measured_joints_o
         pi = _settled_error(bandwidth_hz, None, return_servo=True, moves=12)
         estimate = pi.estimator.bandwidth[[0, 1, 3, 4, 5]] / (2 * np.pi)
         np.testing.assert_allclose(estimate, bandwidth_hz, rtol=0.1)
+
+
+def test_a_provisional_estimate_installed_to_hold_the_pose_does_not_move_the_arm():
+    arm = LaggingArm(offset=DQ_B)
+    pi = PIServo(arm)
+    pi.reset()  # holds where it is
+    run(arm, pi, 0.5)
+    before = arm.q.copy()
+    pi.set_offset_estimate(DQ_B, hold_pose=True)
+    run(arm, pi, 0.5)
+    np.testing.assert_allclose(arm.q, before, atol=1e-6)  # stayed put
+    np.testing.assert_allclose(pi.estimated_jp(), arm.q, atol=1e-6)  # now reads the truth
+    # Installed without holding, the same estimate moves the arm to the desired true joints.
+    arm2 = LaggingArm(offset=DQ_B)
+    pi2 = PIServo(arm2)
+    pi2.reset()
+    run(arm2, pi2, 0.5)
+    desired = pi2.setpoint_jp()
+    pi2.set_offset_estimate(DQ_B)
+    run(arm2, pi2, 1.0)
+    np.testing.assert_allclose(arm2.q, desired, atol=1e-6)
