@@ -31,8 +31,11 @@ from suture_bt.skills.tip_uncertainty import worst_offset_displacement
 #: offset the task allows (SRC: 5°, 5°, 5 mm) at the arm's present joints.
 HOLD_TOLERANCE_CALIBRATED = 0.002
 HOLD_MARGIN_UNCALIBRATED = 0.004
-#: Presentation poses tried before giving up.
+#: Presentation poses tried before giving up; more for an uncalibrated holder, whose answers
+#: need a second view to agree (a report trial's preparation ended after 7: two answers, one
+#: unconfirmed, one with its plane 27° from across the jaws, five refusals).
 MAX_PRESENTATIONS = 7
+MAX_PRESENTATIONS_UNCALIBRATED = 12
 #: Refusals in a row after which presentations chosen from a held needle's in-hand belief
 #: stop trusting it: the belief is dropped and the rest are chosen for a needle of unknown
 #: pose (whole circle). A confidently wrong first estimate (a twin sharing the tip, seen on
@@ -97,10 +100,15 @@ class LocalizeNeedle(Skill):
             raise SkillFailure(f"{arm.name} has no reachable presentation pose ({why[:1]})")
         self.report["presentation_poses"] = [T.tolist() for T in poses]
         tried: list[np.ndarray] = []
-        while poses and len(tried) < MAX_PRESENTATIONS:
+        limit = MAX_PRESENTATIONS if arm.calibrated else MAX_PRESENTATIONS_UNCALIBRATED
+        while len(tried) < limit:
+            if not poses:  # further candidates, past those presented
+                poses = self._more_poses(arm, tried)
+                if not poses:
+                    break
             T = poses.pop(0)
             tried.append(T)
-            self.say(f"presenting the needle held by {arm.name} ({len(tried)}/{MAX_PRESENTATIONS})")
+            self.say(f"presenting the needle held by {arm.name} ({len(tried)}/{limit})")
             present = move_to(
                 ctx.clock, arm, presentation.lifted_first(ctx, arm, T), "present the needle"
             )
@@ -113,6 +121,18 @@ class LocalizeNeedle(Skill):
                 poses = presentation.untried(presentation.choose(ctx, arm)[0], tried)
                 poses = presentation.untried(poses, self.avoid, AVOID_RADIUS)
         raise SkillFailure(f"needle held by {arm.name} not localised: {'; '.join(reasons)}")
+
+    def _more_poses(self, arm, tried: list[np.ndarray]) -> list[np.ndarray]:
+        """The next presentation candidates, none where one was presented or is avoided."""
+
+        def fresh(T: np.ndarray) -> str:
+            if not presentation.untried([T], tried) or not presentation.untried(
+                [T], self.avoid, AVOID_RADIUS
+            ):
+                return "presented already"
+            return ""
+
+        return presentation.choose(self.context, arm, fresh)[0]
 
     def narrow_offsets(self, arm) -> bool:
         """After a look in which one eye saw nothing of the needle held by an uncalibrated
