@@ -18,12 +18,13 @@ from suture_bt.perception.in_hand import estimate_in_hand
 from suture_bt.planning import to_base
 from suture_bt.skills import presentation, second_view
 from suture_bt.skills.base import Skill, SkillFailure, Waiting
-from suture_bt.skills.context import NeedleNotSeen, NeedleObservation, TaskContext
+from suture_bt.skills.context import NeedleBelief, NeedleNotSeen, NeedleObservation, TaskContext
 from suture_bt.skills.grasp_offset import offset_from_grasp
 from suture_bt.skills.line_of_sight import make_way
 from suture_bt.skills.motion import move_joints, move_to, together
 from suture_bt.skills.offset_evidence import offset_grid, unseen_offsets
 from suture_bt.skills.tip_uncertainty import worst_offset_displacement
+from suture_bt.transforms import invert
 
 #: A held needle's wire must pass this close to the holder's blades (m; anywhere along the
 #: stretch that holds it, ``in_hand.BLADE_Z_RANGE``) once the arm is calibrated; before, the
@@ -76,6 +77,8 @@ class LocalizeNeedle(Skill):
         self.earlier: list = [] if earlier is None else earlier
         #: Whether the adopted answer was confirmed by a second view (uncalibrated holder).
         self.confirmed = False
+        #: The latest answer no second view confirmed yet, with the tip pose it was seen at.
+        self._unconfirmed: tuple[np.ndarray, NeedleObservation] | None = None
         self.holder = holder
         self.present = present
         #: Presentation poses not to use (a caller's second opinion wants another view).
@@ -120,7 +123,31 @@ class LocalizeNeedle(Skill):
             if self.narrow_offsets(arm) or self._doubt_belief(len(tried)):
                 poses = presentation.untried(presentation.choose(ctx, arm)[0], tried)
                 poses = presentation.untried(poses, self.avoid, AVOID_RADIUS)
+        if self._unconfirmed is not None:
+            self._adopt_unconfirmed(arm)
+            return
         raise SkillFailure(f"needle held by {arm.name} not localised: {'; '.join(reasons)}")
+
+    def _adopt_unconfirmed(self, arm) -> None:
+        """No two views agreed: the latest answer that passed every check of its own view is
+        adopted as an unconfirmed in-hand estimate (carried with the arm's kinematics, as any
+        in-hand belief is), so the caller can go on; a handover looks again, and its taker
+        only grasps on an answer two views agree on. (Three report trials' preparations
+        ended here when every answer but one was a mirror twin.)"""
+        T_tip_then, obs = self._unconfirmed
+        T_tip_needle = invert(T_tip_then) @ obs.T_world_needle
+        self.context.belief = NeedleBelief(
+            arm.tip_world() @ T_tip_needle,
+            obs.stamp,
+            obs.source,
+            self.holder,
+            T_tip_needle,
+            obs.angle_std_deg,
+            obs.position_std_mm,
+            (self.holder, T_tip_then),
+        )
+        self.report["unconfirmed"] = True
+        self.say(f"needle held by {arm.name}: no two views agreed, last answer kept unconfirmed")
 
     def _more_poses(self, arm, tried: list[np.ndarray]) -> list[np.ndarray]:
         """The next presentation candidates, none where one was presented or is avoided."""
@@ -178,6 +205,8 @@ class LocalizeNeedle(Skill):
         if obs is None or arm is None or arm.calibrated:
             return obs
         q = arm.servo.estimated_jp()
+        if self.present:  # the fallback of a presenting look (:meth:`_adopt_unconfirmed`)
+            self._unconfirmed = (arm.tip_world(), obs)
         skip = 0
         for turns in range(MAX_TURNS + 1):
             if obs is not None:
@@ -195,6 +224,8 @@ class LocalizeNeedle(Skill):
             yield from move_joints(self.context.clock, arm, q_turn, "turn the wrist: another view")
             q = arm.servo.estimated_jp()
             obs = self._look(reasons)
+            if obs is not None and self.present:
+                self._unconfirmed = (arm.tip_world(), obs)
         reasons.append(f"answer not confirmed by a second view of {arm.name}'s needle")
         return None
 

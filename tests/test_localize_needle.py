@@ -161,3 +161,20 @@ def test_an_uncalibrated_holders_answer_with_its_plane_not_across_the_jaws_is_re
     assert "from across psm2's jaws" in skill.feedback and ctx.sensor.looks == 1
     assert across_jaws_deg(tilted, ctx.arm("psm2").tip_world()) > ACROSS_JAWS_DEG
     assert across_jaws_deg(poses["true"], ctx.arm("psm2").tip_world()) < 8.0  # the offset's turn
+
+
+def test_with_no_two_views_agreeing_a_presenting_look_keeps_the_last_answer_unconfirmed(
+    monkeypatch,
+):
+    skill, ctx, poses, q0 = _uncalibrated_holder(monkeypatch, ["true"])
+    arm = ctx.arm("psm2")
+    T_tip_then = arm.tip_world()
+    obs = NeedleObservation(poses["true"], 1.5, 0.5, 0.3, "vision")
+    skill._unconfirmed = (T_tip_then, obs)
+    arm.arm.q = arm.arm.q + np.array([0.0, 0.0, 0.0, 0.2, 0.0, 0.0])  # the arm moved on since
+    skill._adopt_unconfirmed(arm)
+    b = ctx.belief
+    assert b.holder == "psm2" and not b.confirmed and skill.report["unconfirmed"]
+    np.testing.assert_allclose(b.T_tip_needle, np.linalg.inv(T_tip_then) @ poses["true"])
+    np.testing.assert_allclose(b.T_world_needle, arm.tip_world() @ b.T_tip_needle)
+    assert b.seen_at[0] == "psm2" and np.allclose(b.seen_at[1], T_tip_then)
