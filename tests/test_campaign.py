@@ -219,3 +219,27 @@ def test_the_eval_command_parses_every_option_and_reports_without_running(tmp_pa
     assert main(["eval", "--trials", "3", "--report-only", "--out", str(tmp_path)]) == 0
     out = capsys.readouterr().out
     assert "3 trials: runs passed 2/3" in out and (tmp_path / "summary.md").is_file()
+
+
+def test_trials_recorded_after_the_code_changed_are_counted_in_the_report(tmp_path, monkeypatch):
+    from suture_bt.campaign import campaign
+
+    versions = iter([{"commit": "a", "modified": []}] + [{"commit": "a", "modified": []}] * 2)
+    monkeypatch.setattr(campaign, "code_version", lambda: next(versions, {"commit": "b"}))
+    run_campaign(CampaignConfig(), 4, tmp_path, workers=1, trial_fn=_fake())
+    docs = [json.loads((trial_dir(tmp_path, i) / "trial.json").read_text()) for i in range(4)]
+    changed = [d["index"] for d in docs if "code_changed" in d]
+    assert len(changed) == 2 and all(
+        d["code_changed"] == {"commit": "b"} for d in docs if "code_changed" in d
+    )
+    summary = write_report(tmp_path, 4)
+    assert summary.doc["summary"]["code_changed"] == 2
+    assert (
+        "| trials recorded after the code changed (versions mixed: not one result) | 2 |"
+        in (tmp_path / "summary.md").read_text()
+    )
+    # Unchanged code: nothing is flagged.
+    monkeypatch.setattr(campaign, "code_version", lambda: {"commit": "a", "modified": []})
+    other = tmp_path / "other"
+    run_campaign(CampaignConfig(), 2, other, workers=1, trial_fn=_fake())
+    assert write_report(other, 2).doc["summary"]["code_changed"] == 0

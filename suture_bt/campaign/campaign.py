@@ -126,8 +126,24 @@ def record(out: Path, outcome: Outcome) -> dict[str, Any]:
             error = f"scoring failed: {type(exc).__name__}: {exc}"
     doc["status"] = "ok" if error is None else "error"
     doc["reason"] = error
+    changed = code_changed_since_start(out)
+    if changed is not None:
+        doc["code_changed"] = changed
     write_atomic(d / "trial.json", json.dumps(doc, indent=2) + "\n")
     return doc
+
+
+def code_changed_since_start(out: Path) -> dict[str, Any] | None:
+    """The code now, when it differs from what this invocation of the campaign started on
+    (``campaign.json``'s last ``code`` entry), else None. A trial imports the skills from the
+    working tree when it starts: code edited during a campaign mixes versions, and the
+    report says so."""
+    try:
+        started = json.loads((out / "campaign.json").read_text())["code"][-1]
+    except (OSError, ValueError, KeyError, IndexError):
+        return None
+    now = code_version()
+    return None if now == started else now
 
 
 def _world_passed(out: Path, doc: dict[str, Any]) -> bool:

@@ -115,6 +115,7 @@ def trial_row(trial: dict[str, Any]) -> dict[str, Any]:
         "camera": draws.get("camera"),
         "servo": draws.get("servo", "nominal"),
         "faults": draws.get("faults", "none"),
+        "code_changed": "code_changed" in trial,
     }
     result = trial.get("result")
     if result is None:
@@ -195,6 +196,7 @@ def summarise(rows: list[dict[str, Any]], config: dict[str, Any]) -> dict[str, A
     return {
         "trials": len(rows),
         "errors": len(rows) - len(ok),
+        "code_changed": sum(bool(r.get("code_changed")) for r in rows),
         "oracle": any(r.get("oracle") for r in ok),
         "runs": rate(sum(r["passed"] for r in rows), len(rows)),
         "runs_src_trajectory": rate(sum(bool(r.get("src_passed")) for r in rows), len(rows)),

@@ -89,6 +89,8 @@ def summary_markdown(s: dict[str, Any], plots: list[str]) -> str:
         lines.append(f"| pair {pair} | {rate_text(r)} |")
     lines += [
         f"| trials that ended in an error | {s['errors']} |",
+        "| trials recorded after the code changed (versions mixed: not one result) | "
+        f"{s.get('code_changed', 0)} |",
         "| throws where the trajectory scorer and the world disagree | "
         f"{len(s['scorer_disagreements'])} |",
         "",
