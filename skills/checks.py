@@ -34,10 +34,15 @@ def jaw_holds_wire(jaw_angle: float) -> tuple[bool, str]:
     return ok, f"jaw {state} at {jaw_angle:.3f} rad (wire ≥ {JAW_ON_WIRE_MIN} rad)"
 
 
+def pose_difference(T_a: np.ndarray, T_b: np.ndarray) -> tuple[float, float]:
+    """(centre distance m, rotation deg) between two needle poses."""
+    dp = float(np.linalg.norm(T_a[:3, 3] - T_b[:3, 3]))
+    return dp, float(np.rad2deg(rotation_angle(T_a[:3, :3], T_b[:3, :3])))
+
+
 def poses_agree(T_seen: np.ndarray, T_predicted: np.ndarray) -> tuple[bool, str]:
     """The needle seen where the arm's motion says it should be (it moved with the gripper)."""
-    dp = float(np.linalg.norm(T_seen[:3, 3] - T_predicted[:3, 3]))
-    da = float(np.rad2deg(rotation_angle(T_seen[:3, :3], T_predicted[:3, :3])))
+    dp, da = pose_difference(T_seen, T_predicted)
     ok = dp <= AGREE_POSITION and da <= AGREE_ANGLE_DEG
     return ok, f"seen {dp * 1e3:.1f} mm / {da:.1f}° from where the gripper put it"
 

@@ -74,19 +74,15 @@ class Handover(Skill):
             return float("inf")
         return float(np.max(np.abs(q_lift - q_grasp) / JOINT_VEL))
 
-    def _shoulder_travel(self, giver, T_giver: np.ndarray) -> float:
-        """How far (rad, with 10 rad/m on the insertion joint) joints 1-3 travel from where the
-        needle was seen to the presentation ``T_giver``: an uncalibrated giver's estimate
-        carries to another pose with an error that grows with that travel (the hidden offset
-        sits on those joints; the wrist carries it exactly), so the near poses show the needle
-        where it is planned (dev trial 8140008: six presentations far from the seen pose put it
-        on the image border)."""
-        base = giver.base_frame()
+    def _shoulder_travel(self, giver, q_seen: np.ndarray, T_giver: np.ndarray) -> float:
+        """How far (rad, with 10 rad/m on the insertion joint) joints 1-3 travel from
+        ``q_seen``, where the needle was seen, to the presentation ``T_giver``: an uncalibrated
+        giver's estimate carries to another pose with an error that grows with that travel
+        (the hidden offset sits on those joints; the wrist carries it exactly), so the near
+        poses show the needle where it is planned (dev trial 8140008: six presentations far
+        from the seen pose put it on the image border)."""
         try:
-            q_seen = inverse_kinematics(
-                to_base(self.context.belief.seen_at[1], base), giver.servo.setpoint_jp()
-            )
-            q = inverse_kinematics(to_base(T_giver, base), q_seen)
+            q = inverse_kinematics(to_base(T_giver, giver.base_frame()), q_seen)
         except UnreachablePoseError:
             return float("inf")
         return float(np.sum(np.abs(q[:3] - q_seen[:3]) * np.array([1.0, 1.0, 10.0])))
@@ -159,7 +155,13 @@ class Handover(Skill):
         if self.next_pair is not None:
             poses = sorted(poses, key=lambda T: self._time_to_next(taker, T, T_hand))
         elif not giver.calibrated and belief.seen_at is not None:
-            poses = sorted(poses, key=lambda T: self._shoulder_travel(giver, T))
+            try:
+                q_seen = inverse_kinematics(
+                    to_base(belief.seen_at[1], giver.base_frame()), giver.servo.setpoint_jp()
+                )
+                poses = sorted(poses, key=lambda T: self._shoulder_travel(giver, q_seen, T))
+            except UnreachablePoseError:
+                pass  # the order stands
         T_here = self._seen_here(giver)
         if T_here is not None and not taker_can_reach(T_here):
             # Just seen where it is, at a pose safe for presenting: taken there, no new look.

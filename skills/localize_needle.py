@@ -248,8 +248,9 @@ class LocalizeNeedle(Skill):
         self.earlier.append((q_seen, b.T_world_needle.copy()))
 
     def _agrees_with_earlier(self, arm, q_now: np.ndarray, obs: NeedleObservation) -> bool:
-        """Whether ``obs`` (at measured joints ``q_now``) is an earlier answer carried to here
-        for some offset the arm may have; recorded as a check either way when there are any."""
+        """Whether ``obs`` (at joints ``q_now``, the servo's estimate) is an earlier answer
+        carried to here for some offset the arm may still have; recorded as a check either way
+        when there are any."""
         if not self.earlier:
             return False
         details = []
@@ -289,15 +290,12 @@ class LocalizeNeedle(Skill):
         self.report["offset_from_grasp"] = found.summary()
         self.say(f"{arm.name}: provisional offset from its grasp: {found.summary()}")
 
-    def _look(
-        self, reasons: list[str], predicted: np.ndarray | None = None
-    ) -> NeedleObservation | None:
-        """Capture and localise; ``predicted`` (world) makes it a prior-checked look."""
+    def _look(self, reasons: list[str]) -> NeedleObservation | None:
         ctx = self.context
-        previous = ctx.predicted_needle() if predicted is None else predicted
+        previous = ctx.predicted_needle()
         self._unseen_eye = None
         try:
-            obs = ctx.sensor.observe(previous, prior_checked=predicted is not None)
+            obs = ctx.sensor.observe(previous)
         except NeedleNotSeen as e:
             self._unseen_eye = getattr(e, "unseen_eye", None)
             reasons.append(e.reason)

@@ -158,13 +158,13 @@ def needle_clearance(ctx: TaskContext, arm: ArmHandle, T_tip: np.ndarray) -> flo
     return clearance_at(ctx, arm, T_tip, _displacements(arm, q))
 
 
-def in_view(ctx: TaskContext, points_world: np.ndarray) -> bool:
-    """Whether every point projects inside both images with ``VIEW_MARGIN_PX`` to spare."""
+def in_view(ctx: TaskContext, points_world: np.ndarray, margin_px: float = VIEW_MARGIN_PX) -> bool:
+    """Whether every point projects inside both images with ``margin_px`` to spare."""
     for cam in (ctx.camera.model.left, ctx.camera.model.right):
         if np.any(cam.to_camera(points_world)[:, 2] <= 0):
             return False
         uv = cam.project(points_world)
-        m = VIEW_MARGIN_PX
+        m = margin_px
         if np.any(uv < m) or np.any(uv[:, 0] > cam.width - m) or np.any(uv[:, 1] > cam.height - m):
             return False
     return True

@@ -18,10 +18,11 @@ import numpy as np
 from suture_bt.calibration.calibration_pose import offset_box_points
 from suture_bt.geometry.tissue_surface import height_above_tissue
 from suture_bt.kinematics import JOINT_LIMITS, forward_kinematics
-from suture_bt.skills.checks import AGREE_ANGLE_DEG, AGREE_POSITION
+from suture_bt.skills import presentation
+from suture_bt.skills.checks import AGREE_ANGLE_DEG, AGREE_POSITION, pose_difference
 from suture_bt.skills.context import ArmHandle, TaskContext
 from suture_bt.skills.offset_evidence import offset_grid
-from suture_bt.transforms import invert, rotation_angle
+from suture_bt.transforms import invert
 
 #: Wrist turns (rad on joints 4, 5, 6), in order of preference. Measured on dev trials at the
 #: Task 3 start (PSM2, seven scenes, two of whose first answers were twins 17.7 mm / 135-152°
@@ -37,8 +38,6 @@ TURNS = (
 )
 #: Pixels the carried needle keeps from the image border, in both eyes.
 VIEW_MARGIN_PX = 40
-#: Least height (m) of the carried needle above the tissue, under every offset displacement.
-MIN_CLEARANCE = 0.008
 #: Arc samples of the carried needle.
 ARC_SAMPLES = 9
 
@@ -46,19 +45,13 @@ ARC_SAMPLES = 9
 def carried(
     arm: ArmHandle, q_from: np.ndarray, q_to: np.ndarray, T_needle: np.ndarray, dq: np.ndarray
 ) -> np.ndarray:
-    """The needle held rigidly, moved from measured joints ``q_from`` to ``q_to``, when the
-    arm's hidden offset on joints 1-3 is ``dq`` (world frame)."""
+    """The needle held rigidly, moved from joints ``q_from`` to ``q_to`` (the servo's
+    estimate: measured + Δq̂), when the offset still hidden on joints 1-3 is ``dq`` (world)."""
     a, b = np.array(q_from, dtype=float), np.array(q_to, dtype=float)
     a[:3] += dq
     b[:3] += dq
     base = arm.base_frame()
     return base @ forward_kinematics(b) @ invert(base @ forward_kinematics(a)) @ T_needle
-
-
-def disagreement(T_a: np.ndarray, T_b: np.ndarray) -> tuple[float, float]:
-    """(centre distance m, rotation deg) between two needle poses."""
-    dp = float(np.linalg.norm(T_a[:3, 3] - T_b[:3, 3]))
-    return dp, float(np.rad2deg(rotation_angle(T_a[:3, :3], T_b[:3, :3])))
 
 
 def agree_under_some_offset(
@@ -74,14 +67,12 @@ def agree_under_some_offset(
     (ok, one-line detail, the offsets that agree)."""
     if offsets is None:
         offsets = arm.possible_offsets if arm.possible_offsets is not None else offset_grid()
-    scores, agreeing = [], []
-    for dq in offsets:
-        dp, da = disagreement(carried(arm, q_first, q_second, T_first, dq), T_second)
-        scores.append(max(dp / AGREE_POSITION, da / AGREE_ANGLE_DEG))
-        if dp <= AGREE_POSITION and da <= AGREE_ANGLE_DEG:
-            agreeing.append(dq)
-    best = int(np.argmin(scores))
-    dp, da = disagreement(carried(arm, q_first, q_second, T_first, offsets[best]), T_second)
+    diffs = [
+        pose_difference(carried(arm, q_first, q_second, T_first, dq), T_second) for dq in offsets
+    ]
+    scores = [max(dp / AGREE_POSITION, da / AGREE_ANGLE_DEG) for dp, da in diffs]
+    agreeing = [dq for dq, score in zip(offsets, scores, strict=True) if score <= 1.0]
+    dp, da = diffs[int(np.argmin(scores))]
     detail = (
         f"second view {dp * 1e3:.1f} mm / {da:.1f}° from the first carried through the wrist "
         f"turn (limit {AGREE_POSITION * 1e3:.0f} mm / {AGREE_ANGLE_DEG:.0f}°)"
@@ -95,21 +86,10 @@ def _arc(ctx: TaskContext, T_needle: np.ndarray) -> np.ndarray:
     return pts @ T_needle[:3, :3].T + T_needle[:3, 3]
 
 
-def _in_view(ctx: TaskContext, points: np.ndarray) -> bool:
-    for cam in (ctx.camera.model.left, ctx.camera.model.right):
-        if np.any(cam.to_camera(points)[:, 2] <= 0):
-            return False
-        uv = cam.project(points)
-        m = VIEW_MARGIN_PX
-        if np.any(uv < m) or np.any(uv[:, 0] > cam.width - m) or np.any(uv[:, 1] > cam.height - m):
-            return False
-    return True
-
-
 def wrist_turn(
     ctx: TaskContext,
     arm: ArmHandle,
-    q_measured: np.ndarray,
+    q_now: np.ndarray,
     T_needle: np.ndarray,
     skip: int = 0,
 ) -> tuple[np.ndarray, int] | None:
@@ -125,16 +105,14 @@ def wrist_turn(
         q[3:6] += turn
         if np.any(q < JOINT_LIMITS[:, 0]) or np.any(q > JOINT_LIMITS[:, 1]):
             continue
-        q_to = q_measured + (q - q_set)  # the same turn from where the arm measured itself
-        T_to = carried(arm, q_measured, q_to, T_needle, np.zeros(3))
+        q_to = q_now + (q - q_set)  # the same turn from where the arm stands
+        T_to = carried(arm, q_now, q_to, T_needle, np.zeros(3))
         arc = _arc(ctx, T_to)
-        if not _in_view(ctx, arc):
+        if not presentation.in_view(ctx, arc, VIEW_MARGIN_PX):
             continue
         # The needle is seen where it is; only its motion depends on the offset (a little).
-        moved = np.vstack(
-            [_arc(ctx, carried(arm, q_measured, q_to, T_needle, dq)) for dq in corners]
-        )
-        if np.min(height_above_tissue(ctx.phantom, moved)) < MIN_CLEARANCE:
+        moved = np.vstack([_arc(ctx, carried(arm, q_now, q_to, T_needle, dq)) for dq in corners])
+        if np.min(height_above_tissue(ctx.phantom, moved)) < presentation.MIN_NEEDLE_CLEARANCE:
             continue
         return q, k
     return None
