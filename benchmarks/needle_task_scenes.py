@@ -21,7 +21,8 @@ the task priors a caller would know there:
   ``MIN_JAW_SEPARATION`` away), 0-20 mm back (the handover's stand-by distance), open, or
   closed on the wire at 0 mm.
 
-Priors (``task``): held by the holder at its pinch point from its joints; the arms in these
+Priors (``task``): held by the holder at its pinch point from its joints, with the needle's
+plane across its jaws (``AcrossJawsPrior``, the skills' calibrated tolerance); the arms in these
 scenes are where their joints say once calibrated, so the tolerance is the calibrated 1 mm
 (``held_start``: the joints the arm *reports*, i.e. commanded, would be off by the hidden
 offset; the benchmark gives the calibrated pinch point, as the tree localises after
@@ -37,7 +38,7 @@ import numpy as np
 from suture_bt.datagen.needle_data import SceneSample
 from suture_bt.kinematics import UnreachablePoseError, forward_kinematics, inverse_kinematics
 from suture_bt.perception.in_hand import JAW_POINT_IN_TIP
-from suture_bt.perception.needle_prior import HeldPrior, PortPrior, arc_distance
+from suture_bt.perception.needle_prior import AcrossJawsPrior, HeldPrior, PortPrior, arc_distance
 from suture_bt.planning import plan_needle_arc, to_base
 from suture_bt.skills import presentation
 from suture_bt.skills.grasps import (
@@ -49,6 +50,7 @@ from suture_bt.skills.grasps import (
     pulling_hand,
     tip_goal,
 )
+from suture_bt.skills.localize_needle import ACROSS_JAWS_DEG_CALIBRATED
 
 TASK_SETS = ("held_start", "held_presented", "in_port", "handover")
 #: Default initial joints of the SRC scene (sim/default_scene.yaml).
@@ -107,6 +109,16 @@ class _Arm:
         return self._base
 
 
+def _held(sim, arm: str, q: np.ndarray) -> list:
+    """The priors of a needle held by ``arm`` at joints ``q``: its pinch point, and the plane
+    across its jaws as every grasp of the task holds it."""
+    T_tip = _tip(sim, arm, q)
+    return [
+        HeldPrior(arm, _pinch(T_tip), HELD_TOL),
+        AcrossJawsPrior(arm, T_tip[:3, 2].copy(), ACROSS_JAWS_DEG_CALIBRATED),
+    ]
+
+
 def _ctx(sim):
     return SimpleNamespace(
         camera=SimpleNamespace(model=sim.stereo),
@@ -149,7 +161,7 @@ def held_start(sim, rng):
     # The world's in-jaw hand (sim.world.World.in_jaw_grasp_pose) = the skills' driving hand.
     T = _tip(sim, "psm2", q["psm2"]) @ hand(m, a)
     jaw = {"psm1": 0.5, "psm2": JAW_CLOSED}
-    priors = [HeldPrior("psm2", _pinch(_tip(sim, "psm2", q["psm2"])), HELD_TOL)]
+    priors = _held(sim, "psm2", q["psm2"])
     return _sample("held_start", T, q, jaw, rng), priors
 
 
@@ -162,7 +174,7 @@ def held_presented(sim, rng):
         q_arm, T = got
         q = {arm: q_arm, _other(arm): INITIAL_JP[_other(arm)].copy()}
         jaw = {arm: JAW_CLOSED, _other(arm): 0.5}
-        priors = [HeldPrior(arm, _pinch(_tip(sim, arm, q_arm)), HELD_TOL)]
+        priors = _held(sim, arm, q_arm)
         return _sample("held_presented", T, q, jaw, rng), priors
     raise RuntimeError("no reachable presentation in 50 draws")
 
@@ -186,7 +198,7 @@ def in_port(sim, rng):
             continue
         q = {arm: q_arm, _other(arm): INITIAL_JP[_other(arm)].copy()}
         jaw = {arm: JAW_CLOSED, _other(arm): 0.5}
-        priors = [HeldPrior(arm, _pinch(_tip(sim, arm, q_arm)), HELD_TOL)]
+        priors = _held(sim, arm, q_arm)
         for port in (entry, exit_):
             if arc_distance(port.position, T, m) <= PORT_TOL:
                 priors.append(PortPrior(port.name, port.position, PORT_TOL, port.normal))
@@ -216,7 +228,7 @@ def handover(sim, rng):
             continue
         q = {giver: q_give, taker: q_take}
         jaw = {giver: JAW_CLOSED, taker: JAW_CLOSED if d == 0.0 else JAW_OPEN}
-        priors = [HeldPrior(giver, _pinch(_tip(sim, giver, q_give)), HELD_TOL)]
+        priors = _held(sim, giver, q_give)
         return _sample("handover", T, q, jaw, rng), priors
     raise RuntimeError("no reachable handover in 100 draws")
 

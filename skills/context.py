@@ -83,6 +83,7 @@ class NeedleSensor(Protocol):
         prior_checked: bool = False,
         holder: tuple[str, np.ndarray] | None = None,
         holder_tolerance: float = 0.004,
+        jaw_tolerance_deg: float | None = None,
     ) -> NeedleObservation: ...
 
     def support(self, T_world_needle: np.ndarray, angles: np.ndarray) -> tuple[float, float]:

@@ -14,7 +14,7 @@ import numpy as np
 
 from suture_bt.calibration.calibration_pose import offset_box_points
 from suture_bt.kinematics import UnreachablePoseError, inverse_kinematics
-from suture_bt.perception.in_hand import estimate_in_hand
+from suture_bt.perception.in_hand import BLADE_Z_RANGE, JAW_POINT_IN_TIP, estimate_in_hand
 from suture_bt.planning import to_base
 from suture_bt.skills import presentation, second_view
 from suture_bt.skills.base import Skill, SkillFailure, Waiting
@@ -32,6 +32,9 @@ from suture_bt.transforms import invert
 #: offset the task allows (SRC: 5°, 5°, 5 mm) at the arm's present joints.
 HOLD_TOLERANCE_CALIBRATED = 0.002
 HOLD_MARGIN_UNCALIBRATED = 0.004
+#: The localiser's held-by prior measures from the pinch point (``JAW_POINT_IN_TIP``); the
+#: wire may sit anywhere along the blades (``BLADE_Z_RANGE``), up to this much deeper (m).
+PINCH_TO_BLADE_END = float(JAW_POINT_IN_TIP[2] - BLADE_Z_RANGE[0])
 #: Presentation poses tried before giving up; more for an uncalibrated holder, whose answers
 #: need a second view to agree (a report trial's preparation ended after 7: two answers, one
 #: unconfirmed, one with its plane 27° from across the jaws, five refusals).
@@ -48,6 +51,12 @@ DOUBT_AFTER = 3
 #: The localiser's confident twins at the Task 3 start had their plane 39-45° off (dev trial
 #: 8130007): they passed the loose held-by test of an uncalibrated arm, not this one (deg).
 ACROSS_JAWS_DEG = 20.0
+#: The same for a calibrated holder: its tip is where its joints say, but slips may have
+#: tilted the needle in the jaw (harsh profile: up to 10° each). Either limit also goes to the
+#: localiser as a prior (:class:`~suture_bt.perception.needle_prior.AcrossJawsPrior`): its
+#: signed test refuses a mirror twin (136-163° off at the Task 3 start's presentations), and it
+#: tells base from tip when the swage band does not show.
+ACROSS_JAWS_DEG_CALIBRATED = 30.0
 #: Share of the offset bound still possible around a provisional offset from the grasp
 #: (dev fits with 0.2 mm / 1° estimate noise: within 0.2° and 0.2 mm of the true offset).
 PROVISIONAL_SHARE = 0.4
@@ -294,19 +303,24 @@ class LocalizeNeedle(Skill):
         ctx = self.context
         previous = ctx.predicted_needle()
         self._unseen_eye = None
+        held = {}  # the task priors of a held needle, for the localiser
+        if self.holder is not None:
+            arm = ctx.arm(self.holder)
+            tol, tip = self._hold_tolerance(arm), arm.tip_world()
+            jaw_deg = ACROSS_JAWS_DEG_CALIBRATED if arm.calibrated else ACROSS_JAWS_DEG
+            held = {
+                "holder": (arm.name, tip),
+                "holder_tolerance": tol + PINCH_TO_BLADE_END,
+                "jaw_tolerance_deg": jaw_deg,
+            }
         try:
-            obs = ctx.sensor.observe(previous)
+            obs = ctx.sensor.observe(previous, **held)
         except NeedleNotSeen as e:
             self._unseen_eye = getattr(e, "unseen_eye", None)
             reasons.append(e.reason)
             self.report.setdefault("refusals", []).append(e.reason)
             return None
         if self.holder is not None:
-            arm = ctx.arm(self.holder)
-            tol = HOLD_TOLERANCE_CALIBRATED
-            if not arm.calibrated:
-                tol = HOLD_MARGIN_UNCALIBRATED + worst_offset_displacement(arm.servo.estimated_jp())
-            tip = arm.tip_world()
             grip = estimate_in_hand(
                 obs.T_world_needle,
                 np.linalg.inv(arm.base_frame()) @ tip,
@@ -325,20 +339,21 @@ class LocalizeNeedle(Skill):
             if not ok:
                 reasons.append(f"answer disagrees with the grasp: {detail}")
                 return None
-            if not arm.calibrated:
-                tilt = across_jaws_deg(obs.T_world_needle, tip)
-                ok = tilt <= ACROSS_JAWS_DEG
-                detail = (
-                    f"needle plane {tilt:.0f}° from across {arm.name}'s jaws "
-                    f"(limit {ACROSS_JAWS_DEG:.0f}°)"
-                )
-                self.report["checks"].append(
-                    {"check": "across the jaws", "ok": ok, "detail": detail}
-                )
-                if not ok:
-                    reasons.append(f"answer disagrees with the grasp: {detail}")
-                    return None
+            tilt = across_jaws_deg(obs.T_world_needle, tip)
+            ok = tilt <= jaw_deg
+            detail = f"plane {tilt:.0f}° from across {arm.name}'s jaws (limit {jaw_deg:.0f}°)"
+            self.report["checks"].append({"check": "across the jaws", "ok": ok, "detail": detail})
+            if not ok:
+                reasons.append(f"answer disagrees with the grasp: {detail}")
+                return None
         return obs
+
+    @staticmethod
+    def _hold_tolerance(arm) -> float:
+        """How far (m) the wire may pass from ``arm``'s pinch point as its joints give it."""
+        if arm.calibrated:
+            return HOLD_TOLERANCE_CALIBRATED
+        return HOLD_MARGIN_UNCALIBRATED + worst_offset_displacement(arm.servo.estimated_jp())
 
     def _adopt(self, obs: NeedleObservation) -> None:
         if self.confirmed:
@@ -360,6 +375,7 @@ class LocalizeNeedle(Skill):
 
 
 def across_jaws_deg(T_world_needle: np.ndarray, T_world_tip: np.ndarray) -> float:
-    """Angle (deg) between the needle plane's normal and the jaw's tip z axis (either sign)."""
-    cos = abs(float(T_world_needle[:3, 2] @ T_world_tip[:3, 2]))
-    return float(np.degrees(np.arccos(min(cos, 1.0))))
+    """Angle (deg) of the needle plane's normal from as every grasp of the task holds it
+    (needle z against the tip's z axis; signed: a needle turned face over is 180° off)."""
+    cos = -float(T_world_needle[:3, 2] @ T_world_tip[:3, 2])
+    return float(np.degrees(np.arccos(np.clip(cos, -1.0, 1.0))))

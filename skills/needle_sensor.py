@@ -13,7 +13,9 @@ Task priors (:mod:`suture_bt.perception.needle_prior`) go to the localiser when 
 knows them: a prior-checked ``previous`` (the pose the holding arm's motion predicts) becomes a
 predicted-pose prior within the tolerance the caller checks it to (``checks.poses_agree``), and
 a ``holder`` (arm name, its measured tip pose) a held-by prior at the pinch point between its
-jaws. They pick the right one of the localiser's mirror twins, or make it refuse naming them.
+jaws and, given ``jaw_tolerance_deg``, an across-the-jaws prior (the needle's face as every
+grasp of the task holds it), which also tells base from tip when colour cannot. They pick
+the right one of the localiser's mirror twins, or make it refuse naming them.
 """
 
 from __future__ import annotations
@@ -24,7 +26,12 @@ from suture_bt.interfaces import FrameLost, StereoCameraInterface
 from suture_bt.perception.arc_evidence import arc_hits, metal_masks
 from suture_bt.perception.in_hand import JAW_POINT_IN_TIP
 from suture_bt.perception.needle_localizer import MIN_DEPTH, NeedleLocalizer
-from suture_bt.perception.needle_prior import HeldPrior, NeedlePrior, PredictedPosePrior
+from suture_bt.perception.needle_prior import (
+    AcrossJawsPrior,
+    HeldPrior,
+    NeedlePrior,
+    PredictedPosePrior,
+)
 from suture_bt.perception.pose_fit import NeedleNotFound
 from suture_bt.skills.checks import AGREE_ANGLE_DEG, AGREE_POSITION
 from suture_bt.skills.context import NeedleNotSeen, NeedleObservation
@@ -67,7 +74,8 @@ class VisionNeedleSensor:
     ``prior_checked=True`` says the caller will reject an answer that disagrees with
     ``previous``; the localiser may then accept a looser outline fit, and ``previous`` is
     passed as a predicted-pose prior. ``holder`` = (arm name, T_world_tip from its measured
-    joints) adds a held-by prior within ``holder_tolerance`` (m).
+    joints) adds a held-by prior within ``holder_tolerance`` (m) and, with
+    ``jaw_tolerance_deg``, an across-the-jaws prior within that angle.
     """
 
     def __init__(self, camera: StereoCameraInterface, localizer: NeedleLocalizer | None = None):
@@ -87,6 +95,7 @@ class VisionNeedleSensor:
         prior_checked: bool = False,
         holder: tuple[str, np.ndarray] | None = None,
         holder_tolerance: float = HELD_TOLERANCE,
+        jaw_tolerance_deg: float | None = None,
     ) -> NeedleObservation:
         """Capture and localise (world frame), with the priors the caller's knowledge gives."""
         self.calls += 1
@@ -102,7 +111,9 @@ class VisionNeedleSensor:
                 frame.left,
                 frame.right,
                 previous=prev_cam,
-                priors=self.priors(previous, prior_checked, holder, holder_tolerance),
+                priors=self.priors(
+                    previous, prior_checked, holder, holder_tolerance, jaw_tolerance_deg
+                ),
             )
         except NeedleNotFound as exc:
             raise NeedleNotSeen(str(exc), getattr(exc, "unseen_eye", None)) from exc
@@ -128,6 +139,7 @@ class VisionNeedleSensor:
         prior_checked: bool,
         holder: tuple[str, np.ndarray] | None,
         holder_tolerance: float = HELD_TOLERANCE,
+        jaw_tolerance_deg: float | None = None,
     ) -> list[NeedlePrior]:
         """The task priors for the localiser from what the caller gave (world frame)."""
         out: list[NeedlePrior] = []
@@ -141,6 +153,8 @@ class VisionNeedleSensor:
             T_tip = np.asarray(T_tip, dtype=float)
             pinch = T_tip[:3, :3] @ JAW_POINT_IN_TIP + T_tip[:3, 3]
             out.append(HeldPrior(arm, pinch, holder_tolerance))
+            if jaw_tolerance_deg is not None:
+                out.append(AcrossJawsPrior(arm, T_tip[:3, 2].copy(), jaw_tolerance_deg))
         return out
 
     def capture(self):

@@ -73,11 +73,24 @@ DIRECTIONS = [
     (0.0, 1.0, 1.0),
     (-0.5, 1.0, 1.0),
 ]
+#: Jaw axes tilted this far (deg) from straight down (the phantom's −up) toward the camera's
+#: viewing direction: a needle plane nearly level. Level planes keep the needle's possible
+#: places highest above the tissue, and the cameras, looking 40° from straight down, see them
+#: 20-55° from face-on, where the localiser answers; the camera-frame ``DIRECTIONS`` at the
+#: high, off-centre points an uncalibrated arm is left with turn the plane 66-73° from
+#: face-on (measured on the default Task 3 start), where it mostly refuses or errs.
+LEVEL_TILTS_DEG = (0.0, 20.0)
 ROLLS = np.deg2rad(np.arange(0.0, 360.0, 45.0))
-#: A held needle whose believed plane is turned more than this from the left camera's line of
+#: A held needle whose plane is turned more than this from the left camera's line of
 #: sight is presented after those that face it (deg): on a full run every look at 54-66° was
-#: refused (a loose pose, 33-40° spread) and every one at 22-46° answered.
+#: refused (a loose pose, 33-40° spread) and every one at 22-46° answered. The plane is the
+#: believed one, or, the in-hand pose unknown, the one across the jaws (every grasp of the task
+#: holds the needle with its plane's normal along the tip's z axis, whatever the arc angle).
 FACE_ON_DEG = 45.0
+#: Among poses that are not safe under every offset displacement (an uncalibrated arm at the
+#: Task 3 start has no others), one that faces the cameras goes before one that does not when
+#: its needle stands no more than this much lower (m).
+FACE_ON_WORTH = 0.005
 #: How many poses :func:`choose` returns (a skill presents them in turn until one answers).
 CHOSEN = 7
 #: Presentation points whose poses are taken in turn (a refusal moves to the next point).
@@ -181,14 +194,16 @@ def safe_to_present(ctx: TaskContext, arm: ArmHandle, T_tip: np.ndarray) -> bool
 
 
 def face_on(ctx: TaskContext, arm: ArmHandle, T_tip: np.ndarray) -> bool:
-    """Whether the believed needle at this jaw pose faces the left camera within
-    ``FACE_ON_DEG`` (True when the in-hand pose is not known: nothing to prefer)."""
+    """Whether the needle at this jaw pose faces the left camera within ``FACE_ON_DEG``: the
+    believed needle, or, its in-hand pose unknown, a plane across the jaws at the pinch point."""
     b = ctx.belief
     if b is None or b.holder != arm.name or b.T_tip_needle is None:
-        return True
-    T_needle = T_tip @ b.T_tip_needle
-    ray = T_needle[:3, 3] - ctx.camera.model.left.T_world_cam[:3, 3]
-    cos = abs(float(T_needle[:3, 2] @ ray)) / float(np.linalg.norm(ray))
+        centre, normal = T_tip[:3, 3] - GRASP_DEPTH * T_tip[:3, 2], T_tip[:3, 2]
+    else:
+        T_needle = T_tip @ b.T_tip_needle
+        centre, normal = T_needle[:3, 3], T_needle[:3, 2]
+    ray = centre - ctx.camera.model.left.T_world_cam[:3, 3]
+    cos = abs(float(normal @ ray)) / float(np.linalg.norm(ray))
     return bool(np.degrees(np.arccos(min(cos, 1.0))) <= FACE_ON_DEG)
 
 
@@ -200,11 +215,18 @@ def _ik(arm: ArmHandle, T_world_tip: np.ndarray, q_near: np.ndarray) -> np.ndarr
 
 
 def _orientations(ctx: TaskContext, s: float) -> list[np.ndarray]:
-    """Jaw frames (rotation only): each direction, turned about its axis by each roll."""
+    """Jaw frames (rotation only): each direction (``DIRECTIONS`` in the camera frame, then
+    the level ones of ``LEVEL_TILTS_DEG``), turned about its axis by each roll."""
     cam_R = ctx.camera.model.left.T_world_cam[:3, :3]
+    axes = [cam_R @ (np.array([s * d[0], d[1], d[2]]) / np.linalg.norm(d)) for d in DIRECTIONS]
+    down = -ctx.phantom.T_world_phantom[:3, 2]
+    toward = cam_R[:, 2] - (cam_R[:, 2] @ down) * down  # the viewing direction, level part
+    if np.linalg.norm(toward) > 1e-6:
+        toward /= np.linalg.norm(toward)
+        for t in np.deg2rad(LEVEL_TILTS_DEG):
+            axes.append(np.cos(t) * down + np.sin(t) * toward)
     frames = []
-    for d in DIRECTIONS:
-        z = cam_R @ (np.array([s * d[0], d[1], d[2]]) / np.linalg.norm(d))
+    for z in axes:
         a = np.cross(z, cam_R[:, 1])
         a /= np.linalg.norm(a)
         b = np.cross(z, a)
@@ -297,7 +319,7 @@ def iter_candidates(
                 yield g[k]
     for _, group in scan:
         yield from group
-    later.sort(key=lambda c: c[0])
+    later.sort(key=lambda c: c[0] + FACE_ON_WORTH * (not face_on(ctx, arm, c[1])))
     q_now = arm.servo.setpoint_jp()
     for _, T in later:
         if _ik(arm, T, q_now) is not None:

@@ -71,14 +71,14 @@ def _uncalibrated_holder(monkeypatch, answers):
     arm = make_arm("psm2")
     q0, T_true = _presented(arm, make_ctx())
     needle = NeedleModel()
-    # The twin turns 170° about an in-plane axis through the held point: the wire still passes
-    # between the jaws and its plane is 10° from the true one, so the held-by and across-the-
-    # jaws tests cannot tell it from the needle.
+    # The "twin" slides 40° round its circle about the held point: the wire still passes
+    # between the jaws and its plane is the needle's, so neither the held-by nor the
+    # across-the-jaws test can tell it from the needle; only a second view can.
     pivot = make_transform(np.eye(3), needle.point_at(np.deg2rad(150.0)))
-    flip = make_transform(Rotation.from_rotvec([np.deg2rad(170.0), 0, 0]).as_matrix(), np.zeros(3))
+    flip = make_transform(Rotation.from_rotvec([0, 0, np.deg2rad(40.0)]).as_matrix(), np.zeros(3))
     T_twin = T_true @ pivot @ flip @ np.linalg.inv(pivot)
     # Another view's twin (a twin is view-dependent: turned otherwise).
-    flip2 = make_transform(Rotation.from_rotvec([0, np.deg2rad(165.0), 0]).as_matrix(), np.zeros(3))
+    flip2 = make_transform(Rotation.from_rotvec([0, 0, np.deg2rad(-35.0)]).as_matrix(), np.zeros(3))
     poses = {"true": T_true, "twin": T_twin, "twin2": T_true @ pivot @ flip2 @ np.linalg.inv(pivot)}
     fns = [lambda q, w=w: carried(arm, q0, q, poses[w], TRUE_OFFSET) for w in answers]
     ctx = TaskContext(
@@ -161,6 +161,20 @@ def test_an_uncalibrated_holders_answer_with_its_plane_not_across_the_jaws_is_re
     assert "from across psm2's jaws" in skill.feedback and ctx.sensor.looks == 1
     assert across_jaws_deg(tilted, ctx.arm("psm2").tip_world()) > ACROSS_JAWS_DEG
     assert across_jaws_deg(poses["true"], ctx.arm("psm2").tip_world()) < 8.0  # the offset's turn
+
+
+def test_a_mirror_twin_turned_face_over_is_refused_at_its_first_look(monkeypatch):
+    """The localiser's twins at the Task 3 start: turned 136-163° about an in-plane axis, so
+    the plane's line is 17-44° from the needle's but its face is turned over: the signed
+    across-the-jaws test refuses it without a second view."""
+    skill, ctx, poses, q0 = _uncalibrated_holder(monkeypatch, ["true"])
+    pivot = make_transform(np.eye(3), ctx.needle.point_at(np.deg2rad(150.0)))
+    flip = make_transform(Rotation.from_rotvec([np.deg2rad(170.0), 0, 0]).as_matrix(), np.zeros(3))
+    over = poses["true"] @ pivot @ flip @ np.linalg.inv(pivot)
+    ctx.sensor.answers = [lambda q: carried(ctx.arm("psm2"), q0, q, over, TRUE_OFFSET)]
+    assert _finish(skill) is SkillStatus.FAILURE
+    assert "from across psm2's jaws" in skill.feedback and ctx.sensor.looks == 1
+    assert across_jaws_deg(over, ctx.arm("psm2").tip_world()) > 150.0
 
 
 def test_with_no_two_views_agreeing_a_presenting_look_keeps_the_last_answer_unconfirmed(

@@ -171,3 +171,55 @@ def test_rendered_held_needle_with_its_holders_prior_and_a_contradicting_one():
             loc.localize(left, right, priors=[HeldPrior("psm2", away, 0.002)])
     finally:
         sim.close()
+
+
+def test_across_jaws_prior_is_signed_once_the_ends_are_known_and_not_before():
+    from suture_bt.perception.needle_prior import AcrossJawsPrior, check_across_jaws
+
+    T = make_transform(np.eye(3), (0.0, 0.0, 0.1))  # needle z = world z
+    prior = AcrossJawsPrior("psm2", np.array([0.0, 0.0, -2.0]), tolerance_deg=20.0)
+    assert prior.angle_deg(T) == pytest.approx(0.0, abs=1e-6)
+    over = T.copy()
+    over[:3, :3] = np.diag([1.0, -1.0, -1.0])  # turned face over (as a base-tip swap does)
+    assert prior.angle_deg(over) == pytest.approx(180.0)
+    assert prior.angle_deg(over, signed=False) == pytest.approx(0.0, abs=1e-6)
+    assert prior.miss(over, MODEL) == pytest.approx(0.0, abs=1e-6)  # the fit: modulo the swap
+    tilted = T.copy()
+    c, s = np.cos(np.radians(30.0)), np.sin(np.radians(30.0))
+    tilted[:3, :3] = np.array([[1.0, 0.0, 0.0], [0.0, c, -s], [0.0, s, c]])
+    assert prior.miss(tilted, MODEL) == pytest.approx(1.5)
+    assert prior.facing(T, over) and not prior.facing(over, T)
+    check_across_jaws([prior], T, "colour")
+    with pytest.raises(PriorContradicted, match=r"turned 180° from as held across psm2's jaws"):
+        check_across_jaws([prior], over, "colour")
+
+
+def test_across_jaws_prior_turns_the_mirror_twin_into_the_right_answer():
+    from suture_bt.perception.needle_prior import AcrossJawsPrior
+
+    st, T, occ, short, kw = _twin_case()
+    Tw = _world(st, T)
+    free = PoseFitter(st, MODEL).fit(*occ, short, **kw)
+    assert pose_errors(free.T_cam_needle, T)[0] > 10.0  # the twin, unconstrained
+    jaws = AcrossJawsPrior("psm2", -Tw[:3, 2], tolerance_deg=10.0)
+    res = PoseFitter(st, MODEL).fit(*occ, short, priors=[jaws], **kw)
+    pos, ang = pose_errors(res.T_cam_needle, T)
+    assert pos < 1.0 and ang < 4.0
+    from scipy.spatial.transform import Rotation
+
+    across = np.cross(Tw[:3, 2], [1.0, 0.0, 0.0])  # a turn that tilts the normal 60°
+    turn = Rotation.from_rotvec(np.radians(60.0) * across / np.linalg.norm(across))
+    wrong = AcrossJawsPrior("psm2", turn.apply(-Tw[:3, 2]), tolerance_deg=10.0)
+    with pytest.raises(PriorContradicted, match="across psm2's jaws"):
+        PoseFitter(st, MODEL).fit(*occ, short, priors=[wrong], **kw)
+
+
+def test_sensor_adds_the_across_jaws_prior_when_given_its_tolerance():
+    from suture_bt.perception.needle_prior import AcrossJawsPrior
+    from suture_bt.skills.needle_sensor import VisionNeedleSensor
+
+    tip = make_transform(np.eye(3), (0.01, 0.05, 0.08))
+    (held,) = VisionNeedleSensor.priors(None, False, ("psm2", tip), 0.003)
+    held, jaws = VisionNeedleSensor.priors(None, False, ("psm2", tip), 0.003, 20.0)
+    assert isinstance(jaws, AcrossJawsPrior) and jaws.tolerance_deg == 20.0
+    np.testing.assert_allclose(jaws.jaw_axis, tip[:3, 2])

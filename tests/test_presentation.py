@@ -18,9 +18,12 @@ from suture_bt.skills.grasps import GRASP_DEPTH, hand
 from suture_bt.skills.presentation import (
     DEPTH,
     DIRECTIONS,
+    FACE_ON_WORTH,
+    LEVEL_TILTS_DEG,
     MIN_CLEARANCE,
     MIN_NEEDLE_CLEARANCE,
     candidate_poses,
+    face_on,
     lifted_first,
     needle_clearance,
     needle_places,
@@ -175,8 +178,36 @@ def test_a_presentation_that_may_put_the_needle_into_the_tissue_goes_last():
     ok = [c >= MIN_NEEDLE_CLEARANCE for c in clear]
     assert any(ok) and not all(ok)
     assert all(a >= b for a, b in zip(ok, ok[1:], strict=False))  # every clear one first
-    unsafe = [c for c, k in zip(clear, ok, strict=True) if not k]
-    assert all(a >= b - 1e-9 for a, b in zip(unsafe, unsafe[1:], strict=False))  # highest first
+    poses = candidate_poses(ctx, arm, limit=2000)
+    unsafe = [
+        c + FACE_ON_WORTH * face_on(ctx, arm, T)
+        for c, k, T in zip(clear, ok, poses, strict=True)
+        if not k
+    ]
+    # Highest first, a pose that faces the cameras counted FACE_ON_WORTH higher.
+    assert all(a >= b - 1e-9 for a, b in zip(unsafe, unsafe[1:], strict=False))
+
+
+def test_a_needle_of_unknown_pose_faces_the_cameras_as_the_jaw_axis_says():
+    """Unknown in-hand pose: the plane is across the jaws whatever the arc angle, so a jaw
+    pointing along the line of sight faces the cameras and one across it does not."""
+    ctx = make_ctx()
+    arm = make_arm("psm2")
+    cam = ctx.camera.model.left.T_world_cam
+    point = cam[:3, 3] + 0.06 * cam[:3, 2]
+    along = make_transform(cam[:3, :3], point)
+    across = make_transform(cam[:3, :3] @ np.array([[1, 0, 0], [0, 0, -1], [0, 1, 0]]), point)
+    assert face_on(ctx, arm, along) and not face_on(ctx, arm, across)
+
+
+def test_level_jaw_axes_are_among_the_orientations():
+    from suture_bt.skills.presentation import _orientations
+
+    ctx = make_ctx()
+    down = -ctx.phantom.T_world_phantom[:3, 2]
+    tilts = [np.degrees(np.arccos(np.clip(R[:, 2] @ down, -1, 1))) for R in _orientations(ctx, 1.0)]
+    for t in LEVEL_TILTS_DEG:
+        assert min(abs(np.array(tilts) - t)) < 1e-6
 
 
 def test_a_known_grasp_is_judged_by_its_arc():

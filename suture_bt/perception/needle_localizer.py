@@ -45,9 +45,11 @@ from suture_bt.perception.needle_ends import (
     with_band_pieces,
 )
 from suture_bt.perception.needle_prior import (
+    AcrossJawsPrior,
     NeedlePrior,
     PredictedPosePrior,
     PriorContradicted,
+    check_across_jaws,
     check_orientation,
 )
 from suture_bt.perception.network import (
@@ -149,7 +151,8 @@ class NeedleEstimate:
     keypoints_left: np.ndarray
     keypoint_scores: np.ndarray
     #: Colour vote for the base↔tip choice (> 0 kept, < 0 swapped) and what decided it:
-    #: "colour" (the swage band) or "previous" (the nearer of the two to the previous estimate).
+    #: "colour" (the swage band), "previous" (the nearer of the two to the previous estimate)
+    #: or "jaws" (the face a holder's jaws hold it by: :class:`AcrossJawsPrior`).
     end_evidence: float
     end_decided_by: str
     timings_ms: dict
@@ -348,10 +351,12 @@ class NeedleLocalizer:
         fit = self._fit((left, right), views, ends, depth, half_width, previous, kp, score, priors)
         exposure = self._exposure((left, right), views, fit.T_cam_needle, priors)
         t3 = time.perf_counter()
+        jaws = [p for p in priors if isinstance(p, AcrossJawsPrior)]
         T_cam, evidence, decided_by = self._orient(
-            fit.T_cam_needle, (left, right), views, half_width, previous
+            fit.T_cam_needle, (left, right), views, half_width, previous, jaws
         )
         check_orientation(predicted, self.stereo.left.T_world_cam @ T_cam, decided_by)
+        check_across_jaws(jaws, self.stereo.left.T_world_cam @ T_cam, decided_by)
         t4 = time.perf_counter()
         return NeedleEstimate(
             T_cam_needle=T_cam,
@@ -577,9 +582,10 @@ class NeedleLocalizer:
             )
         return fit
 
-    def _orient(self, T_cam: np.ndarray, images, views, half_width: float, previous):
-        """Base↔tip choice: the swage band's colour, else continuity with ``previous``; with
-        neither, NeedleNotFound: a swapped needle sends the grasp and the insertion to the
+    def _orient(self, T_cam: np.ndarray, images, views, half_width: float, previous, jaws=()):
+        """Base↔tip choice: the swage band's colour, else continuity with ``previous``, else
+        the holder's jaws (``jaws``: :class:`AcrossJawsPrior`, the needle's face as held);
+        with none, NeedleNotFound: a swapped needle sends the grasp and the insertion to the
         wrong end.
 
         A fitted end that touches an occluder may hide the band, and one off the mask is not
@@ -618,6 +624,11 @@ class NeedleLocalizer:
             prev = np.asarray(previous, float)[:3, :3]
             keep = rotation_angle(prev, T_cam[:3, :3]) <= rotation_angle(prev, other[:3, :3])
             return (T_cam if keep else other), evidence, "previous"
+        if jaws:
+            other = swapped(T_cam, self.model)
+            to_world = self.stereo.left.T_world_cam
+            keep = jaws[0].facing(to_world @ T_cam, to_world @ other)
+            return (T_cam if keep else other), evidence, "jaws"
         raise NeedleNotFound(
             "which end is the base cannot be told: the swage band shows at neither fitted end "
             f"(colour evidence {evidence:+.2f}, needs ±{MIN_EVIDENCE:.2f}) and there is no "

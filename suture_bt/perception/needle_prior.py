@@ -8,7 +8,11 @@ outline almost as well as the needle does (DESIGN.md §5). What the task knows b
   uncalibrated, sub-mm once its joint offset is compensated);
 - :class:`PortPrior`: the needle is in a port, so its arc passes through the port's known
   position;
-- :class:`PredictedPosePrior`: the pose the holding arm's motion predicts.
+- :class:`PredictedPosePrior`: the pose the holding arm's motion predicts;
+- :class:`AcrossJawsPrior`: the needle is held across an arm's jaws the way every grasp of the
+  task holds it: its plane's normal (needle z) against the jaw's approach axis (tip z). An
+  edge-on needle's mirror twin has its normal turned 136-163° from the needle's (measured at
+  the Task 3 start's presentations): with the ends told apart, the signed test refuses it.
 
 The fit keeps, among its final candidates (both twins), those consistent with every prior and
 answers the best-cost one; when none is consistent it refuses (:class:`PriorContradicted`) with
@@ -126,7 +130,43 @@ class PredictedPosePrior:
         )
 
 
-NeedlePrior = HeldPrior | PortPrior | PredictedPosePrior
+@dataclass(frozen=True)
+class AcrossJawsPrior:
+    """Held across ``arm``'s jaws: needle z points against ``jaw_axis`` (the tip's z axis,
+    world) within ``tolerance_deg``. Within the fit, whose candidates may still have base and
+    tip swapped (the swap turns the normal over), the test is taken modulo the swap; once the
+    ends are told apart it is signed (:func:`check_across_jaws`), and when neither colour nor a
+    previous estimate tells them apart, the jaw does (:meth:`facing`)."""
+
+    arm: str
+    jaw_axis: np.ndarray
+    tolerance_deg: float = 20.0
+
+    def angle_deg(self, T_world_needle: np.ndarray, signed: bool = True) -> float:
+        """Angle (deg) of the needle's normal from against the jaw axis (modulo the swap:
+        from the axis line)."""
+        axis = np.asarray(self.jaw_axis, float)
+        cos = -float(T_world_needle[:3, 2] @ axis) / float(np.linalg.norm(axis))
+        cos = cos if signed else abs(cos)
+        return float(np.degrees(np.arccos(np.clip(cos, -1.0, 1.0))))
+
+    def miss(self, T_world_needle: np.ndarray, model: NeedleModel) -> float:
+        """The normal's angle from the jaw axis line over the tolerance (≤ 1: consistent)."""
+        return self.angle_deg(T_world_needle, signed=False) / self.tolerance_deg
+
+    def facing(self, T_world_needle: np.ndarray, T_world_swapped: np.ndarray) -> bool:
+        """Whether ``T_world_needle`` (rather than its base ↔ tip swap) faces as held."""
+        return self.angle_deg(T_world_needle) <= self.angle_deg(T_world_swapped)
+
+    def refusal(self, nearest: float) -> str:
+        """The reason when the nearest candidate misses by ``nearest`` tolerances."""
+        return (
+            f"no fitted pose lies across {self.arm}'s jaws: nearest plane "
+            f"{nearest * self.tolerance_deg:.0f}° off, tolerance {self.tolerance_deg:.0f}°"
+        )
+
+
+NeedlePrior = HeldPrior | PortPrior | PredictedPosePrior | AcrossJawsPrior
 
 
 def prior_misses(
@@ -153,6 +193,19 @@ def contradiction(priors: Sequence[NeedlePrior], misses: np.ndarray) -> PriorCon
     if not parts:
         parts.append("no fitted pose agrees with all the priors at once")
     return PriorContradicted("; ".join(parts))
+
+
+def check_across_jaws(priors: Sequence[NeedlePrior], T_world: np.ndarray, decided_by: str) -> None:
+    """Refuse when, with base and tip told apart, the needle's face is turned against a
+    holder's jaws (the signed :class:`AcrossJawsPrior` test: a mirror twin, or the ends
+    swapped)."""
+    for p in priors:
+        if isinstance(p, AcrossJawsPrior) and p.angle_deg(T_world) > p.tolerance_deg:
+            raise PriorContradicted(
+                f"the needle's face is turned {p.angle_deg(T_world):.0f}° from as held across "
+                f"{p.arm}'s jaws (tolerance {p.tolerance_deg:.0f}°) once base and tip were "
+                f"told apart ({decided_by}): a mirror twin or swapped ends"
+            )
 
 
 def check_orientation(
