@@ -33,6 +33,11 @@ class Speed:
 #: 2 rad/s; with the faster sweeps and the settle below, runs take ~55-60 s instead of ~70 s;
 #: lateral errors at the ports rose from ~0.14 to ~0.2 mm mean, a tenth of the 2.5 mm rule).
 TRANSIT = Speed(0.25, 2.0, 3.0, 15.0)
+#: Joint-space moves in free space (``move_to`` when a straight path would leave the joint
+#: limits, e.g. the tool roll wraps): the wrist joints as fast as ``TRANSIT`` turns the tip, the
+#: others at the planner's defaults (a 3.7 rad roll wrap took 3.2 s at 1.5 rad/s).
+FREE_JOINT_VEL = np.array([0.6, 0.6, 0.05, 3.0, 3.0, 3.0])
+FREE_JOINT_ACC = np.array([2.0, 2.0, 0.2, 15.0, 15.0, 15.0])
 #: The last centimetre to a grasp or an entry (slower, more accurate).
 FINE = Speed(0.05, 0.4, 1.2, 5.0)
 #: Hold still after a move before looking or closing the jaw, until the arm has stopped (its
@@ -78,7 +83,7 @@ def move_to(
             except UnreachablePoseError as e:
                 raise SkillFailure(f"{what}: {arm.name} cannot: {e.reason}") from None
             qs.append(q)
-        move = JointMove(arm.servo, qs)
+        move = JointMove(arm.servo, qs, v_max=FREE_JOINT_VEL, a_max=FREE_JOINT_ACC)
     yield from _follow(clock, arm, move, what)
 
 
