@@ -115,7 +115,7 @@ def _held(sim, arm: str, q: np.ndarray) -> list:
     T_tip = _tip(sim, arm, q)
     return [
         HeldPrior(arm, _pinch(T_tip), HELD_TOL),
-        AcrossJawsPrior(arm, T_tip[:3, 2].copy(), ACROSS_JAWS_DEG_CALIBRATED),
+        AcrossJawsPrior(arm, -T_tip[:3, 2], ACROSS_JAWS_DEG_CALIBRATED),
     ]
 
 

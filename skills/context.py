@@ -84,6 +84,7 @@ class NeedleSensor(Protocol):
         holder: tuple[str, np.ndarray] | None = None,
         holder_tolerance: float = 0.004,
         jaw_tolerance_deg: float | None = None,
+        held_face: np.ndarray | None = None,
     ) -> NeedleObservation: ...
 
     def support(self, T_world_needle: np.ndarray, angles: np.ndarray) -> tuple[float, float]:

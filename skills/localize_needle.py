@@ -46,7 +46,8 @@ MAX_PRESENTATIONS_UNCALIBRATED = 12
 #: a campaign trial: 24 mm off at the base) otherwise aims every presentation wrongly.
 DOUBT_AFTER = 3
 #: A needle driver holds the needle with its jaws across the needle plane (every grasp of the
-#: task: the plane's normal along the tip's z axis); an uncalibrated arm's tip is turned by
+#: task: the plane's normal along the tip's z axis; needle z against it, but for a needle
+#: picked up turned over, whose belief says so); an uncalibrated arm's tip is turned by
 #: up to ~7° by its hidden offset and a slip tilts the needle by up to 10° (harsh profile).
 #: The localiser's confident twins at the Task 3 start had their plane 39-45° off (dev trial
 #: 8130007): they passed the loose held-by test of an uncalibrated arm, not this one (deg).
@@ -308,10 +309,12 @@ class LocalizeNeedle(Skill):
             arm = ctx.arm(self.holder)
             tol, tip = self._hold_tolerance(arm), arm.tip_world()
             jaw_deg = ACROSS_JAWS_DEG_CALIBRATED if arm.calibrated else ACROSS_JAWS_DEG
+            face = self._held_face(tip)
             held = {
                 "holder": (arm.name, tip),
                 "holder_tolerance": tol + PINCH_TO_BLADE_END,
                 "jaw_tolerance_deg": jaw_deg,
+                "held_face": face,
             }
         try:
             obs = ctx.sensor.observe(previous, **held)
@@ -339,7 +342,7 @@ class LocalizeNeedle(Skill):
             if not ok:
                 reasons.append(f"answer disagrees with the grasp: {detail}")
                 return None
-            tilt = across_jaws_deg(obs.T_world_needle, tip)
+            tilt = across_jaws_deg(obs.T_world_needle, tip, face)
             ok = tilt <= jaw_deg
             detail = f"plane {tilt:.0f}° from across {arm.name}'s jaws (limit {jaw_deg:.0f}°)"
             self.report["checks"].append({"check": "across the jaws", "ok": ok, "detail": detail})
@@ -347,6 +350,16 @@ class LocalizeNeedle(Skill):
                 reasons.append(f"answer disagrees with the grasp: {detail}")
                 return None
         return obs
+
+    def _held_face(self, T_world_tip: np.ndarray) -> np.ndarray:
+        """The needle's z axis (world) as the holder's grasp holds it: the believed in-hand
+        pose's, else against the tip's z axis (the hand of the Task 3 start, of a handover and
+        of a pick-up from a needle lying face up; only a needle picked up turned over is held
+        the other way, and its belief says so)."""
+        b = self.context.belief
+        if b is not None and b.holder == self.holder and b.T_tip_needle is not None:
+            return T_world_tip[:3, :3] @ np.asarray(b.T_tip_needle)[:3, 2]
+        return -T_world_tip[:3, 2]
 
     @staticmethod
     def _hold_tolerance(arm) -> float:
@@ -374,8 +387,12 @@ class LocalizeNeedle(Skill):
         )
 
 
-def across_jaws_deg(T_world_needle: np.ndarray, T_world_tip: np.ndarray) -> float:
-    """Angle (deg) of the needle plane's normal from as every grasp of the task holds it
-    (needle z against the tip's z axis; signed: a needle turned face over is 180° off)."""
-    cos = -float(T_world_needle[:3, 2] @ T_world_tip[:3, 2])
+def across_jaws_deg(
+    T_world_needle: np.ndarray, T_world_tip: np.ndarray, face: np.ndarray | None = None
+) -> float:
+    """Angle (deg) of the needle plane's normal from as its grasp holds it: along ``face``
+    (world), by default against the tip's z axis (signed: a needle turned face over is 180°
+    off)."""
+    face = -T_world_tip[:3, 2] if face is None else np.asarray(face, float)
+    cos = float(T_world_needle[:3, 2] @ face) / float(np.linalg.norm(face))
     return float(np.degrees(np.arccos(np.clip(cos, -1.0, 1.0))))

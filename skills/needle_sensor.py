@@ -75,7 +75,8 @@ class VisionNeedleSensor:
     ``previous``; the localiser may then accept a looser outline fit, and ``previous`` is
     passed as a predicted-pose prior. ``holder`` = (arm name, T_world_tip from its measured
     joints) adds a held-by prior within ``holder_tolerance`` (m) and, with
-    ``jaw_tolerance_deg``, an across-the-jaws prior within that angle.
+    ``jaw_tolerance_deg``, an across-the-jaws prior within that angle: the needle's z axis
+    along ``held_face`` (world; default against the tip's z axis, as the task's hands hold it).
     """
 
     def __init__(self, camera: StereoCameraInterface, localizer: NeedleLocalizer | None = None):
@@ -96,6 +97,7 @@ class VisionNeedleSensor:
         holder: tuple[str, np.ndarray] | None = None,
         holder_tolerance: float = HELD_TOLERANCE,
         jaw_tolerance_deg: float | None = None,
+        held_face: np.ndarray | None = None,
     ) -> NeedleObservation:
         """Capture and localise (world frame), with the priors the caller's knowledge gives."""
         self.calls += 1
@@ -112,7 +114,7 @@ class VisionNeedleSensor:
                 frame.right,
                 previous=prev_cam,
                 priors=self.priors(
-                    previous, prior_checked, holder, holder_tolerance, jaw_tolerance_deg
+                    previous, prior_checked, holder, holder_tolerance, jaw_tolerance_deg, held_face
                 ),
             )
         except NeedleNotFound as exc:
@@ -140,6 +142,7 @@ class VisionNeedleSensor:
         holder: tuple[str, np.ndarray] | None,
         holder_tolerance: float = HELD_TOLERANCE,
         jaw_tolerance_deg: float | None = None,
+        held_face: np.ndarray | None = None,
     ) -> list[NeedlePrior]:
         """The task priors for the localiser from what the caller gave (world frame)."""
         out: list[NeedlePrior] = []
@@ -154,7 +157,8 @@ class VisionNeedleSensor:
             pinch = T_tip[:3, :3] @ JAW_POINT_IN_TIP + T_tip[:3, 3]
             out.append(HeldPrior(arm, pinch, holder_tolerance))
             if jaw_tolerance_deg is not None:
-                out.append(AcrossJawsPrior(arm, T_tip[:3, 2].copy(), jaw_tolerance_deg))
+                face = -T_tip[:3, 2] if held_face is None else np.asarray(held_face, float)
+                out.append(AcrossJawsPrior(arm, face.copy(), jaw_tolerance_deg))
         return out
 
     def capture(self):

@@ -23,11 +23,13 @@ def session():
 
 
 def turned_in_jaw(session, arm: str, deg: float):
-    """A pose change that looks like a turn in ``arm``'s jaw: about its closing axis through
-    the held point (the wire stays between the blades, so the held-by test passes it)."""
+    """A pose change that looks like a turn in ``arm``'s jaw: about the jaw's own axis through
+    the held point (the wire stays between the blades and the plane across them, so the
+    held-by and across-the-jaws tests pass it; a turn about the closing axis tilts the plane
+    and the across-the-jaws test refuses it outright)."""
     T_tip = GroundTruth(session.world).tip_pose_world(arm)
     pivot = T_tip[:3, 3] - 0.0015 * T_tip[:3, 2]
-    R = Rotation.from_rotvec(np.deg2rad(deg) * T_tip[:3, 1]).as_matrix()
+    R = Rotation.from_rotvec(np.deg2rad(deg) * T_tip[:3, 2]).as_matrix()
     return make_transform(R, pivot - R @ pivot)
 
 

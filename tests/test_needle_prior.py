@@ -177,7 +177,7 @@ def test_across_jaws_prior_is_signed_once_the_ends_are_known_and_not_before():
     from suture_bt.perception.needle_prior import AcrossJawsPrior, check_across_jaws
 
     T = make_transform(np.eye(3), (0.0, 0.0, 0.1))  # needle z = world z
-    prior = AcrossJawsPrior("psm2", np.array([0.0, 0.0, -2.0]), tolerance_deg=20.0)
+    prior = AcrossJawsPrior("psm2", np.array([0.0, 0.0, 2.0]), tolerance_deg=20.0)
     assert prior.angle_deg(T) == pytest.approx(0.0, abs=1e-6)
     over = T.copy()
     over[:3, :3] = np.diag([1.0, -1.0, -1.0])  # turned face over (as a base-tip swap does)
@@ -201,7 +201,7 @@ def test_across_jaws_prior_turns_the_mirror_twin_into_the_right_answer():
     Tw = _world(st, T)
     free = PoseFitter(st, MODEL).fit(*occ, short, **kw)
     assert pose_errors(free.T_cam_needle, T)[0] > 10.0  # the twin, unconstrained
-    jaws = AcrossJawsPrior("psm2", -Tw[:3, 2], tolerance_deg=10.0)
+    jaws = AcrossJawsPrior("psm2", Tw[:3, 2], tolerance_deg=10.0)
     res = PoseFitter(st, MODEL).fit(*occ, short, priors=[jaws], **kw)
     pos, ang = pose_errors(res.T_cam_needle, T)
     assert pos < 1.0 and ang < 4.0
@@ -209,7 +209,7 @@ def test_across_jaws_prior_turns_the_mirror_twin_into_the_right_answer():
 
     across = np.cross(Tw[:3, 2], [1.0, 0.0, 0.0])  # a turn that tilts the normal 60°
     turn = Rotation.from_rotvec(np.radians(60.0) * across / np.linalg.norm(across))
-    wrong = AcrossJawsPrior("psm2", turn.apply(-Tw[:3, 2]), tolerance_deg=10.0)
+    wrong = AcrossJawsPrior("psm2", turn.apply(Tw[:3, 2]), tolerance_deg=10.0)
     with pytest.raises(PriorContradicted, match="across psm2's jaws"):
         PoseFitter(st, MODEL).fit(*occ, short, priors=[wrong], **kw)
 
@@ -222,4 +222,7 @@ def test_sensor_adds_the_across_jaws_prior_when_given_its_tolerance():
     (held,) = VisionNeedleSensor.priors(None, False, ("psm2", tip), 0.003)
     held, jaws = VisionNeedleSensor.priors(None, False, ("psm2", tip), 0.003, 20.0)
     assert isinstance(jaws, AcrossJawsPrior) and jaws.tolerance_deg == 20.0
-    np.testing.assert_allclose(jaws.jaw_axis, tip[:3, 2])
+    np.testing.assert_allclose(jaws.face, -tip[:3, 2])  # as the task's hands hold it
+    turned = np.array([0.0, 0.0, 1.0])  # a needle picked up turned over: its belief says so
+    _, jaws = VisionNeedleSensor.priors(None, False, ("psm2", tip), 0.003, 20.0, turned)
+    np.testing.assert_allclose(jaws.face, turned)

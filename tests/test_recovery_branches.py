@@ -325,8 +325,10 @@ def _rot_x(a: float) -> np.ndarray:
 def test_one_wrong_answer_in_the_in_hand_check_is_refuted_by_a_second_look(session):
     # A confident wrong answer taken as a slip once drove an insertion 10 mm beside its entry
     # (benchmark seed 1497539761). Here the first look's answer is turned 40° about the jaw's
-    # closing axis through the held point (what a slip looks like, the wire still between the
-    # blades); the second look, from higher up, agrees with the grasp.
+    # own axis through the held point (what a slip along the wire looks like: the wire still
+    # between the blades, the plane across them; a turn about the closing axis tilts the plane
+    # and the across-the-jaws test refuses it outright); the second look, from higher up,
+    # agrees with the grasp.
     import dataclasses
 
     from scipy.spatial.transform import Rotation
@@ -345,7 +347,7 @@ def test_one_wrong_answer_in_the_in_hand_check_is_refuted_by_a_second_look(sessi
             return obs
         T_tip = GroundTruth(session.world).tip_pose_world("psm2")  # where the jaw is now
         pivot = T_tip[:3, 3] - 0.0015 * T_tip[:3, 2]
-        R = Rotation.from_rotvec(np.deg2rad(40.0) * T_tip[:3, 1]).as_matrix()
+        R = Rotation.from_rotvec(np.deg2rad(40.0) * T_tip[:3, 2]).as_matrix()
         turn = make_transform(R, pivot - R @ pivot)
         return dataclasses.replace(obs, T_world_needle=turn @ obs.T_world_needle)
 

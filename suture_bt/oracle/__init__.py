@@ -26,6 +26,7 @@ class OracleNeedleSensor:
         holder: tuple[str, np.ndarray] | None = None,
         holder_tolerance: float = 0.004,
         jaw_tolerance_deg: float | None = None,
+        held_face: np.ndarray | None = None,
     ) -> NeedleObservation:
         self.calls += 1
         return NeedleObservation(self._truth.needle_pose(), self._clock.now(), 0.0, 0.0, "oracle")

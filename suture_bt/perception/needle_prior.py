@@ -9,8 +9,9 @@ outline almost as well as the needle does (DESIGN.md §5). What the task knows b
 - :class:`PortPrior`: the needle is in a port, so its arc passes through the port's known
   position;
 - :class:`PredictedPosePrior`: the pose the holding arm's motion predicts;
-- :class:`AcrossJawsPrior`: the needle is held across an arm's jaws the way every grasp of the
-  task holds it: its plane's normal (needle z) against the jaw's approach axis (tip z). An
+- :class:`AcrossJawsPrior`: the needle is held across an arm's jaws the way its grasp holds
+  it: its plane's normal (needle z) along a known face (against the tip's z axis for the
+  task's driving and pulling hands). An
   edge-on needle's mirror twin has its normal turned 136-163° from the needle's (measured at
   the Task 3 start's presentations): with the ends told apart, the signed test refuses it.
 
@@ -132,26 +133,26 @@ class PredictedPosePrior:
 
 @dataclass(frozen=True)
 class AcrossJawsPrior:
-    """Held across ``arm``'s jaws: needle z points against ``jaw_axis`` (the tip's z axis,
-    world) within ``tolerance_deg``. Within the fit, whose candidates may still have base and
-    tip swapped (the swap turns the normal over), the test is taken modulo the swap; once the
-    ends are told apart it is signed (:func:`check_across_jaws`), and when neither colour nor a
-    previous estimate tells them apart, the jaw does (:meth:`facing`)."""
+    """Held across ``arm``'s jaws: the needle's z axis points along ``face`` (world: the
+    grasp's own, e.g. against the tip's z axis for the task's driving and pulling hands)
+    within ``tolerance_deg``. Within the fit, whose candidates may still have base and tip
+    swapped (the swap turns the normal over), the test is taken modulo the swap; once the ends
+    are told apart it is signed (:func:`check_across_jaws`), and when neither colour nor a
+    previous estimate tells them apart, the grasp does (:meth:`facing`)."""
 
     arm: str
-    jaw_axis: np.ndarray
+    face: np.ndarray
     tolerance_deg: float = 20.0
 
     def angle_deg(self, T_world_needle: np.ndarray, signed: bool = True) -> float:
-        """Angle (deg) of the needle's normal from against the jaw axis (modulo the swap:
-        from the axis line)."""
-        axis = np.asarray(self.jaw_axis, float)
-        cos = -float(T_world_needle[:3, 2] @ axis) / float(np.linalg.norm(axis))
+        """Angle (deg) of the needle's normal from ``face`` (modulo the swap: from its line)."""
+        face = np.asarray(self.face, float)
+        cos = float(T_world_needle[:3, 2] @ face) / float(np.linalg.norm(face))
         cos = cos if signed else abs(cos)
         return float(np.degrees(np.arccos(np.clip(cos, -1.0, 1.0))))
 
     def miss(self, T_world_needle: np.ndarray, model: NeedleModel) -> float:
-        """The normal's angle from the jaw axis line over the tolerance (≤ 1: consistent)."""
+        """The normal's angle from the face's line over the tolerance (≤ 1: consistent)."""
         return self.angle_deg(T_world_needle, signed=False) / self.tolerance_deg
 
     def facing(self, T_world_needle: np.ndarray, T_world_swapped: np.ndarray) -> bool:
