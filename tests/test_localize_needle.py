@@ -64,6 +64,24 @@ class _Sensor:
         return NeedleObservation(T, 0.0, 0.5, 0.3, "vision")
 
 
+def _turned(needle: NeedleModel, T_needle: np.ndarray, rotvec_deg) -> np.ndarray:
+    """``T_needle`` turned by ``rotvec_deg`` (needle frame) about the held point (arc 150°)."""
+    pivot = make_transform(np.eye(3), needle.point_at(np.deg2rad(150.0)))
+    R = Rotation.from_rotvec(np.deg2rad(rotvec_deg)).as_matrix()
+    return T_needle @ pivot @ make_transform(R, np.zeros(3)) @ np.linalg.inv(pivot)
+
+
+def _refused_at_first_look(monkeypatch, rotvec_deg):
+    """An uncalibrated holder whose every answer is the needle turned by ``rotvec_deg``
+    about the held point: the skill's end status, its context and the turned pose."""
+    skill, ctx, poses, q0 = _uncalibrated_holder(monkeypatch, ["true"])
+    turned = _turned(ctx.needle, poses["true"], rotvec_deg)
+    ctx.sensor.answers = [lambda q: carried(ctx.arm("psm2"), q0, q, turned, TRUE_OFFSET)]
+    status = _finish(skill)
+    assert "from across psm2's jaws" in skill.feedback and ctx.sensor.looks == 1
+    return status, ctx, poses, turned
+
+
 def _uncalibrated_holder(monkeypatch, answers):
     """A LocalizeNeedle on an uncalibrated PSM2 at a presentation pose whose sensor gives
     ``answers`` (each: which pose, "true" or "twin", the needle carried with the arm)."""
@@ -74,12 +92,12 @@ def _uncalibrated_holder(monkeypatch, answers):
     # The "twin" slides 40° round its circle about the held point: the wire still passes
     # between the jaws and its plane is the needle's, so neither the held-by nor the
     # across-the-jaws test can tell it from the needle; only a second view can.
-    pivot = make_transform(np.eye(3), needle.point_at(np.deg2rad(150.0)))
-    flip = make_transform(Rotation.from_rotvec([0, 0, np.deg2rad(40.0)]).as_matrix(), np.zeros(3))
-    T_twin = T_true @ pivot @ flip @ np.linalg.inv(pivot)
-    # Another view's twin (a twin is view-dependent: turned otherwise).
-    flip2 = make_transform(Rotation.from_rotvec([0, 0, np.deg2rad(-35.0)]).as_matrix(), np.zeros(3))
-    poses = {"true": T_true, "twin": T_twin, "twin2": T_true @ pivot @ flip2 @ np.linalg.inv(pivot)}
+    poses = {
+        "true": T_true,
+        "twin": _turned(needle, T_true, [0.0, 0.0, 40.0]),
+        # Another view's twin (a twin is view-dependent: turned otherwise).
+        "twin2": _turned(needle, T_true, [0.0, 0.0, -35.0]),
+    }
     fns = [lambda q, w=w: carried(arm, q0, q, poses[w], TRUE_OFFSET) for w in answers]
     ctx = TaskContext(
         arms={"psm2": arm},
@@ -151,14 +169,9 @@ def test_a_calibrated_holders_answer_needs_no_second_view(monkeypatch):
 
 
 def test_an_uncalibrated_holders_answer_with_its_plane_not_across_the_jaws_is_refused(monkeypatch):
-    skill, ctx, poses, q0 = _uncalibrated_holder(monkeypatch, ["true"])
     # A twin seen at dev trial 8130007: its plane 39-45° from the needle's, tip end right.
-    pivot = make_transform(np.eye(3), ctx.needle.point_at(np.deg2rad(150.0)))
-    flip = make_transform(Rotation.from_rotvec([np.deg2rad(140.0), 0, 0]).as_matrix(), np.zeros(3))
-    tilted = poses["true"] @ pivot @ flip @ np.linalg.inv(pivot)
-    ctx.sensor.answers = [lambda q: carried(ctx.arm("psm2"), q0, q, tilted, TRUE_OFFSET)]
-    assert _finish(skill) is SkillStatus.FAILURE
-    assert "from across psm2's jaws" in skill.feedback and ctx.sensor.looks == 1
+    status, ctx, poses, tilted = _refused_at_first_look(monkeypatch, [140.0, 0.0, 0.0])
+    assert status is SkillStatus.FAILURE
     assert across_jaws_deg(tilted, ctx.arm("psm2").tip_world()) > ACROSS_JAWS_DEG
     assert across_jaws_deg(poses["true"], ctx.arm("psm2").tip_world()) < 8.0  # the offset's turn
 
@@ -167,13 +180,8 @@ def test_a_mirror_twin_turned_face_over_is_refused_at_its_first_look(monkeypatch
     """The localiser's twins at the Task 3 start: turned 136-163° about an in-plane axis, so
     the plane's line is 17-44° from the needle's but its face is turned over: the signed
     across-the-jaws test refuses it without a second view."""
-    skill, ctx, poses, q0 = _uncalibrated_holder(monkeypatch, ["true"])
-    pivot = make_transform(np.eye(3), ctx.needle.point_at(np.deg2rad(150.0)))
-    flip = make_transform(Rotation.from_rotvec([np.deg2rad(170.0), 0, 0]).as_matrix(), np.zeros(3))
-    over = poses["true"] @ pivot @ flip @ np.linalg.inv(pivot)
-    ctx.sensor.answers = [lambda q: carried(ctx.arm("psm2"), q0, q, over, TRUE_OFFSET)]
-    assert _finish(skill) is SkillStatus.FAILURE
-    assert "from across psm2's jaws" in skill.feedback and ctx.sensor.looks == 1
+    status, ctx, _, over = _refused_at_first_look(monkeypatch, [170.0, 0.0, 0.0])
+    assert status is SkillStatus.FAILURE
     assert across_jaws_deg(over, ctx.arm("psm2").tip_world()) > 150.0
 
 
