@@ -15,6 +15,7 @@ import numpy as np
 from suture_bt.calibration.calibration_pose import offset_box_points
 from suture_bt.kinematics import UnreachablePoseError, inverse_kinematics
 from suture_bt.perception.in_hand import BLADE_Z_RANGE, JAW_POINT_IN_TIP, estimate_in_hand
+from suture_bt.perception.needle_prior import AcrossJawsPrior
 from suture_bt.planning import to_base
 from suture_bt.skills import presentation, second_view
 from suture_bt.skills.base import Skill, SkillFailure, Waiting
@@ -394,5 +395,4 @@ def across_jaws_deg(
     (world), by default against the tip's z axis (signed: a needle turned face over is 180°
     off)."""
     face = -T_world_tip[:3, 2] if face is None else np.asarray(face, float)
-    cos = float(T_world_needle[:3, 2] @ face) / float(np.linalg.norm(face))
-    return float(np.degrees(np.arccos(np.clip(cos, -1.0, 1.0))))
+    return AcrossJawsPrior("holder", face).angle_deg(T_world_needle)

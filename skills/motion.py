@@ -15,6 +15,7 @@ import numpy as np
 from suture_bt.kinematics import JOINT_LIMITS, UnreachablePoseError, inverse_kinematics
 from suture_bt.planning import CartesianMove, JointMove, PoseSequenceMove, TimedPoses, to_base
 from suture_bt.planning.needle_arc import in_base
+from suture_bt.planning.trajectory import JOINT_ACC, JOINT_VEL
 from suture_bt.skills.base import SkillFailure, Waiting
 from suture_bt.skills.context import ArmHandle
 
@@ -36,8 +37,8 @@ TRANSIT = Speed(0.25, 2.0, 3.0, 15.0)
 #: Joint-space moves in free space (``move_to`` when a straight path would leave the joint
 #: limits, e.g. the tool roll wraps): the wrist joints as fast as ``TRANSIT`` turns the tip, the
 #: others at the planner's defaults (a 3.7 rad roll wrap took 3.2 s at 1.5 rad/s).
-FREE_JOINT_VEL = np.array([0.6, 0.6, 0.05, 3.0, 3.0, 3.0])
-FREE_JOINT_ACC = np.array([2.0, 2.0, 0.2, 15.0, 15.0, 15.0])
+FREE_JOINT_VEL = np.r_[JOINT_VEL[:3], 3.0, 3.0, 3.0]
+FREE_JOINT_ACC = np.r_[JOINT_ACC[:3], 15.0, 15.0, 15.0]
 #: The last centimetre to a grasp or an entry (slower, more accurate).
 FINE = Speed(0.05, 0.4, 1.2, 5.0)
 #: Hold still after a move before looking or closing the jaw, until the arm has stopped (its
