@@ -123,15 +123,15 @@ class NeedleStillHeld(py_trees.behaviour.Behaviour):
         self.context = needs(kwargs, "context", f"watch {self.name!r}")
 
     def update(self) -> Status:
-        b = self.context.belief
-        if b is None or b.holder is None:
+        holder = self.context.holder()
+        if holder is None:
             self.feedback_message = "no holder to watch"
             return Status.RUNNING
-        angle = self.context.arm(b.holder).jaw_angle()
+        angle = self.context.arm(holder).jaw_angle()
         if _closed_empty(angle):
-            self.feedback_message = f"needle dropped by {b.holder} ({jaw_holds_wire(angle)[1]})"
+            self.feedback_message = f"needle dropped by {holder} ({jaw_holds_wire(angle)[1]})"
             return Status.FAILURE
-        self.feedback_message = f"{b.holder}'s jaw at {angle:.3f} rad"
+        self.feedback_message = f"{holder}'s jaw at {angle:.3f} rad"
         return Status.RUNNING
 
 

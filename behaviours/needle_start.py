@@ -33,6 +33,7 @@ class NeedleStart(py_trees.behaviour.Behaviour):
         held, detail = jaw_holds_wire(angle)
         held = held and angle < 0.2
         start = "jaw" if held else "tissue"
+        self.context.start_holder = self.arm if held else None
         self.blackboard.set(keys.NEEDLE_START.name, start, overwrite=True)
         self.feedback_message = f"needle starts in the {start} ({detail})"
         return Status.SUCCESS

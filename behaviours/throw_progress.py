@@ -82,6 +82,29 @@ def holds_needle(arm: str) -> DoneCheck:
     return check
 
 
+def prepared(holder: str, arms: tuple[str, ...]) -> DoneCheck:
+    """'' unless every one of ``arms`` is calibrated and ``holder`` holds the needle with a
+    known in-hand pose (what the preparation leaves: a preparation that picked up a needle
+    dropped on its way there has nothing left to do)."""
+    held = holds_needle(holder)
+
+    def check(ctx: TaskContext) -> str:
+        if not all(ctx.arm(a).calibrated for a in arms) or not held(ctx):
+            return ""
+        return f"{', '.join(arms)} calibrated and {held(ctx)}"
+
+    return check
+
+
+def calibrated(arm: str) -> DoneCheck:
+    """'' unless ``arm`` is calibrated (its calibration not found lost since)."""
+
+    def check(ctx: TaskContext) -> str:
+        return f"{arm} is calibrated" if ctx.arm(arm).calibrated else ""
+
+    return check
+
+
 def grasp_leaves_room(pair: int, arm: str) -> DoneCheck:
     """'' when ``arm``'s believed grasp fails the planner's grasp limit for ``pair`` (too close
     to the tip: a re-grasp is needed); anything else is left to the insertion to judge."""

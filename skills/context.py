@@ -135,6 +135,9 @@ class TaskContext:
     reports: list[dict[str, Any]] = field(default_factory=list)
     #: pair -> {status, reason, t_start, t_end}: the throws' windows (``ThrowScope`` writes).
     throws: dict[int, dict[str, Any]] = field(default_factory=dict)
+    #: The arm whose jaw held the needle at the start (its measured jaw says so), before any
+    #: estimate names a holder: a drop before the first estimate is still seen.
+    start_holder: str | None = None
 
     @property
     def oracle(self) -> bool:
@@ -160,6 +163,10 @@ class TaskContext:
             return plan_needle_arc(*self.phantom.pair(pair), self.needle)
         except NeedleArcError as e:
             raise SkillFailure(f"{where}: {e.reason}") from None
+
+    def holder(self) -> str | None:
+        """The arm believed to hold the needle: the belief's, or before any belief the start's."""
+        return self.start_holder if self.belief is None else self.belief.holder
 
     def predicted_needle(self) -> np.ndarray | None:
         """Where the needle is now if it moved with its holder since the last estimate."""

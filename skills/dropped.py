@@ -39,14 +39,14 @@ UNDER_SURFACE, PORT_RADIUS = 0.001, 0.006
 
 def dropped_by(context: TaskContext) -> tuple[str | None, str]:
     """The believed holder whose measured jaw closed below the wire (None: no drop), and why."""
-    b = context.belief
-    if b is None or b.holder is None:
+    holder = context.holder()
+    if holder is None:
         return None, "no arm is believed to hold the needle"
-    angle = context.arm(b.holder).jaw_angle()
+    angle = context.arm(holder).jaw_angle()
     held, detail = checks.jaw_holds_wire(angle)
     if angle <= checks.JAW_CLOSED_MAX and not held:
-        return b.holder, f"needle dropped by {b.holder} ({detail})"
-    return None, f"{b.holder} still holds the needle ({detail})"
+        return holder, f"needle dropped by {holder} ({detail})"
+    return None, f"{holder} still holds the needle ({detail})"
 
 
 def caught_in_tissue(context: TaskContext, T_world_needle: np.ndarray) -> str:
@@ -103,10 +103,15 @@ class FindDropped(Skill):
             raise SkillFailure(f"no dropped needle to look for: {why}")
         self.report.update(dropped_by=arm, jaw=why)
         T_last = ctx.predicted_needle()
-        ctx.belief = NeedleBelief(T_last, ctx.clock.now(), "dropped", holder=None)
+        # Dropped before any estimate (the start's holder): it fell from the holder's jaw.
+        fell_from = ctx.arm(arm).tip_world()[:3, 3] if T_last is None else T_last[:3, 3]
+        ctx.start_holder = None
+        ctx.belief = None
+        if T_last is not None:
+            ctx.belief = NeedleBelief(T_last, ctx.clock.now(), "dropped", holder=None)
         self.say(f"{why}: {arm} opens its jaw and both arms make way for the cameras")
         yield from jaw_to(ctx.arm(arm), JAW_OPEN)
-        yield from together(*self._make_way(arm, self._landing_guess(T_last)))
+        yield from together(*self._make_way(arm, self._landing_guess(fell_from)))
         yield from wait(ctx.clock, SETTLE_S)
         self.say(f"looking for the needle dropped by {arm}")
         try:
@@ -139,11 +144,11 @@ class FindDropped(Skill):
         self.report["T_world_needle"] = T.tolist()
         self.say(f"needle dropped by {arm} lies on the tissue at {at} mm, in {self.picker}'s reach")
 
-    def _landing_guess(self, T_last: np.ndarray) -> np.ndarray:
-        """Where a needle falling from ``T_last`` lands first: straight down on the tissue top."""
+    def _landing_guess(self, p: np.ndarray) -> np.ndarray:
+        """Where a needle falling from ``p`` (world) lands first: straight down on the tissue
+        top."""
         T_ph = self.context.phantom.T_world_phantom
         up, top = T_ph[:3, 2], (T_ph @ np.array([0.0, 0.0, TISSUE_TOP_Z, 1.0]))[:3]
-        p = T_last[:3, 3]
         return p - float((p - top) @ up) * up
 
     def _make_way(self, dropper: str, target: np.ndarray) -> list[Waiting]:

@@ -143,6 +143,42 @@ def test_needle_dropped_before_the_insertion_is_picked_up_and_the_throw_resumed(
     assert GroundTruth(session.world).needle_holders() == ["psm1"]  # pulled through
 
 
+@pytest.mark.slow
+def test_needle_dropped_while_presented_at_the_start_is_picked_up_and_the_preparation_done(
+    session,
+):
+    # PSM2 (uncalibrated) presents the start needle; before any estimate names a holder the
+    # jaw loses it (the watch knows the holder from the start's jaw reading). The needle is
+    # found on the tissue, PSM2 calibrates with its now empty jaw and picks it up at the
+    # throw's grasp; the retried preparation then finds both arms ready and skips the rest.
+    present = node(session, "Localize needle in PSM2")
+    assert session.run_until(lambda s: present.status == Status.RUNNING) is not None
+    session.step(10)
+    session.world.faults.drop("psm2")
+    throw = finish(session)
+    assert ran(session, "Retry: prepare after a drop") == [
+        (1, "Unless both arms are ready", Status.FAILURE),
+        (1, "Pick-up after a drop in preparation (time limit)", Status.SUCCESS),
+        (2, "Unless both arms are ready", Status.SUCCESS),
+    ]
+    retry = node(session, "Retry: prepare after a drop")
+    assert "needle dropped by psm2" in retry.history[0][3]
+    assert node(session, "Unless both arms are ready").feedback_message.startswith(
+        "skipped: psm1, psm2 calibrated and psm2 already holds the needle"
+    )
+    reports = session.context.reports
+    done = [(r["behaviour"], r["status"]) for r in reports]
+    assert done[:4] == [
+        ("Calibrate PSM1", "SUCCESS"),
+        ("Find the dropped needle", "SUCCESS"),
+        ("Calibrate PSM2 (needle on the tissue)", "SUCCESS"),
+        ("PSM2 picks the dropped needle up (preparation)", "SUCCESS"),
+    ]
+    assert not any(r["skill"] == "hand over" for r in reports)
+    assert throw["status"] == "SUCCESS", throw["reason"]
+    assert passed(session), session.scores()[0].failure
+
+
 #: On the floor beyond the phantom's near edge: in the cameras' view, out of both arms' reach.
 OUT_OF_REACH = (0.0, -0.12, 0.0421)
 

@@ -59,9 +59,11 @@ from suture_bt.behaviours.recovery import recovery_idiom
 from suture_bt.behaviours.sim_timeout import SimTimeout
 from suture_bt.behaviours.throw_progress import (
     SkipWhen,
+    calibrated,
     grasp_for_remaining,
     grasp_leaves_room,
     holds_needle,
+    prepared,
     pulled_through,
 )
 from suture_bt.behaviours.throw_scope import ThrowScope
@@ -100,13 +102,55 @@ def prepare(pairs: tuple[int, ...]) -> py_trees.behaviour.Behaviour:
             ComparisonExpression(keys.NEEDLE_START.name, "jaw", operator.eq),
             ComparisonExpression(keys.NEEDLE_START.name, "tissue", operator.eq),
         ],
-        subtrees=[from_jaw, from_tissue],
+        subtrees=[
+            prepared_despite_a_drop(from_jaw, grasp),
+            SimTimeout("Prepare from the tissue (time limit)", from_tissue, PREPARE_LIMIT),
+        ],
         name="Where is the needle?",
     )
-    seq = py_trees.composites.Sequence(
+    return py_trees.composites.Sequence(
         "Prepare", memory=True, children=[NeedleStart(INSERTER), choose]
     )
-    return SimTimeout("Prepare (time limit)", seq, PREPARE_LIMIT)
+
+
+def prepared_despite_a_drop(
+    from_jaw: py_trees.behaviour.Behaviour, grasp
+) -> py_trees.behaviour.Behaviour:
+    """The preparation from PSM2's jaw with the needle watched: a drop (during a
+    presentation, a handover, PSM2's calibration) is recovered from the tissue: the needle
+    found where it fell, PSM2 calibrated if it is not yet, and PSM2 picks it up at ``grasp``;
+    the retry then finds both arms ready and skips the rest."""
+    watched = ParallelWithReason(
+        "Prepare from PSM2's jaw, needle watched",
+        policy=py_trees.common.ParallelPolicy.SuccessOnSelected([from_jaw], synchronise=False),
+        children=[NeedleStillHeld(), from_jaw],
+        voice=1,
+    )
+    pick_up = py_trees.composites.Sequence(
+        "Pick up the needle dropped in preparation",
+        memory=True,
+        children=[
+            NeedleDropped(),
+            FindDroppedNeedle(INSERTER, grasp),
+            SkipWhen(
+                "Unless PSM2 is calibrated",
+                Calibrate(INSERTER, name="Calibrate PSM2 (needle on the tissue)"),
+                calibrated(INSERTER),
+            ),
+            PickUpNeedle(INSERTER, grasp, name="PSM2 picks the dropped needle up (preparation)"),
+        ],
+    )
+    return recovery_idiom(
+        "Retry: prepare after a drop",
+        SkipWhen(
+            "Unless both arms are ready",
+            SimTimeout("Prepare (time limit)", watched, PREPARE_LIMIT),
+            prepared(INSERTER, (PULLER, INSERTER)),
+        ),
+        SimTimeout("Pick-up after a drop in preparation (time limit)", pick_up, PICK_UP_LIMIT),
+        RETRIES,
+        blame_recovery=True,
+    )
 
 
 def calibrate_psm2_via_psm1(
