@@ -92,6 +92,11 @@ class NeedleSensor(Protocol):
         frame shows as needle."""
         ...
 
+    def seen_pixels(self) -> tuple[np.ndarray, np.ndarray]:
+        """Pixels (N×2 per eye, left and right) where the last look saw needle, whether or
+        not it answered (a refusal still says where needle was seen)."""
+        ...
+
     def hits(self, T_world_needle: np.ndarray, angles: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """Per sample of the arc at ``angles`` of a predicted pose: shown as needle (left,
         right)."""

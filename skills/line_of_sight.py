@@ -12,6 +12,7 @@ from __future__ import annotations
 
 import numpy as np
 
+from suture_bt.kinematics import L_PITCH2YAW, frame_transforms
 from suture_bt.skills.base import Waiting
 from suture_bt.skills.context import TaskContext
 from suture_bt.skills.motion import feasible, move_to
@@ -85,3 +86,65 @@ def make_way(ctx: TaskContext, target: np.ndarray, keep: str | None = None) -> l
         if T is not None and not feasible(other, [T]):
             moves.append(move_to(ctx.clock, other, [T], "make way for the cameras"))
     return moves
+
+
+#: The holder's own tool as the cameras see it around a presented needle (known instrument
+#: geometry, m): the shaft (radius 4.2 mm, ending ``SHAFT_END`` before the wrist-pitch axis)
+#: and the clevis (a block about 13 × 4.4 × 6 mm between the pitch and yaw axes), each as a
+#: capsule with ``MARGIN`` added. The jaws hide only the wire where it is held.
+SHAFT_RADIUS, SHAFT_END, SHAFT_SEEN = 0.0042, 0.006, 0.08
+CLEVIS_HALF_LENGTH, CLEVIS_RADIUS = 0.0065, 0.0037
+MARGIN = 0.0005
+#: A point counts as hidden when the sight line meets the tool this far in front of it (m).
+IN_FRONT = 0.002
+
+
+def _closest_on_segments(p0, p1, q0, q1):
+    """Distances between segments p0→p1 (N×3 each) and the one segment q0→q1, and the
+    parameter along each p segment (0 at p0) of the closest point."""
+    d1, d2, r = p1 - p0, q1 - q0, p0 - q0
+    a = np.einsum("ij,ij->i", d1, d1)
+    e = max(float(d2 @ d2), 1e-18)
+    f = r @ d2
+    c = np.einsum("ij,ij->i", d1, r)
+    b = d1 @ d2
+    denom = a * e - b * b
+    s = np.where(denom > 1e-18, np.clip((b * f - c * e) / np.maximum(denom, 1e-18), 0, 1), 0.0)
+    t = np.clip((b * s + f) / e, 0.0, 1.0)
+    s = np.clip((b * t - c) / a, 0.0, 1.0)
+    gap = (p0 + s[:, None] * d1) - (q0 + t[:, None] * d2)
+    return np.linalg.norm(gap, axis=1), s
+
+
+def own_tool_capsules(T_world_base: np.ndarray, q: np.ndarray) -> list[tuple]:
+    """The holding tool's shaft and clevis at joints ``q`` as (start, end, radius), world."""
+    frames = [T_world_base @ F for F in frame_transforms(q)]
+    F4, F5 = frames[3], frames[4]  # tool roll (its origin: the wrist-pitch axis), wrist pitch
+    shaft_end = F4[:3, 3] - SHAFT_END * F4[:3, 2]
+    shaft_seen = shaft_end - SHAFT_SEEN * F4[:3, 2]
+    clevis = F5[:3, 3] + 0.5 * L_PITCH2YAW * F5[:3, 0]
+    half = CLEVIS_HALF_LENGTH * F5[:3, 0]
+    return [
+        (shaft_end, shaft_seen, SHAFT_RADIUS + MARGIN),
+        (clevis - half, clevis + half, CLEVIS_RADIUS + MARGIN),
+    ]
+
+
+def hidden_by_own_tool(
+    ctx: TaskContext, T_world_base: np.ndarray, q: np.ndarray, points: np.ndarray
+) -> float:
+    """Share (worse eye) of ``points`` (world, a held needle's possible places) hidden from
+    the cameras by the holding tool's shaft and clevis at joints ``q``: the sight line
+    passes through them in front of the point."""
+    pts = np.asarray(points, dtype=float)
+    capsules = own_tool_capsules(T_world_base, q)
+    worst = 0.0
+    for eye in _eyes(ctx):
+        p0 = np.broadcast_to(eye, pts.shape)
+        length = np.linalg.norm(pts - eye, axis=1)
+        hidden = np.zeros(len(pts), bool)
+        for a, b, radius in capsules:
+            dist, s = _closest_on_segments(p0, pts, a, b)
+            hidden |= (dist < radius) & (s * length < length - IN_FRONT)
+        worst = max(worst, float(np.mean(hidden)))
+    return worst

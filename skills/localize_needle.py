@@ -23,7 +23,7 @@ from suture_bt.skills.context import NeedleBelief, NeedleNotSeen, NeedleObservat
 from suture_bt.skills.grasp_offset import offset_from_grasp
 from suture_bt.skills.line_of_sight import make_way
 from suture_bt.skills.motion import move_joints, move_to, together
-from suture_bt.skills.offset_evidence import offset_grid, unseen_offsets
+from suture_bt.skills.offset_evidence import offset_grid, seen_offsets, unseen_offsets
 from suture_bt.skills.tip_uncertainty import worst_offset_displacement
 from suture_bt.transforms import invert
 
@@ -94,7 +94,9 @@ class LocalizeNeedle(Skill):
         self.present = present
         #: Presentation poses not to use (a caller's second opinion wants another view).
         self.avoid = [np.asarray(T, dtype=float) for T in avoid]
-        self._unseen_eye: str | None = None
+        #: What the looks since the last narrowing saw of an uncalibrated holder's needle:
+        #: (joints, an eye that saw nothing or None, the needle pixels per eye).
+        self._evidence: list[tuple[np.ndarray, str | None, tuple]] = []
 
     def program(self) -> Waiting:
         ctx = self.context
@@ -173,15 +175,26 @@ class LocalizeNeedle(Skill):
         return presentation.choose(self.context, arm, fresh)[0]
 
     def narrow_offsets(self, arm) -> bool:
-        """After a look in which one eye saw nothing of the needle held by an uncalibrated
-        ``arm``: rule out the offsets that would have shown it (kept in the arm's handle for
-        the next presentations). True when some were ruled out and some are left."""
-        if self._unseen_eye is None or arm.calibrated:
+        """After looks at the needle held by an uncalibrated ``arm``: rule out the offsets
+        they contradict (kept in the arm's handle for the next presentations): those that
+        would have shown the needle to an eye that saw none, and those under which the needle
+        an eye saw could not be in the jaw (:mod:`offset_evidence`). True when some were
+        ruled out and some are left; evidence that leaves none (the network missed the needle
+        or saw something else) is not used."""
+        evidence, self._evidence = self._evidence, []
+        if arm.calibrated or not evidence:
             return False
         before = offset_grid() if arm.possible_offsets is None else arm.possible_offsets
-        left = unseen_offsets(self.context, arm, arm.servo.estimated_jp(), self._unseen_eye, before)
-        if len(left) == 0 or len(left) == len(before):
-            return False  # a contradiction (the network missed it) or nothing learnt
+        left = before
+        for q, unseen_eye, seen in evidence:
+            if unseen_eye is not None:
+                narrower = unseen_offsets(self.context, arm, q, unseen_eye, left)
+            else:
+                narrower = seen_offsets(self.context, arm, q, seen, left)
+            if len(narrower):
+                left = narrower
+        if len(left) == len(before):
+            return False
         arm.possible_offsets = left
         self.report.setdefault("offsets_left", []).append(len(left))
         return True
@@ -304,7 +317,6 @@ class LocalizeNeedle(Skill):
     def _look(self, reasons: list[str]) -> NeedleObservation | None:
         ctx = self.context
         previous = ctx.predicted_needle()
-        self._unseen_eye = None
         held = {}  # the task priors of a held needle, for the localiser
         if self.holder is not None:
             arm = ctx.arm(self.holder)
@@ -320,10 +332,11 @@ class LocalizeNeedle(Skill):
         try:
             obs = ctx.sensor.observe(previous, **held)
         except NeedleNotSeen as e:
-            self._unseen_eye = getattr(e, "unseen_eye", None)
+            self._keep_evidence(getattr(e, "unseen_eye", None))
             reasons.append(e.reason)
             self.report.setdefault("refusals", []).append(e.reason)
             return None
+        self._keep_evidence(None)
         if self.holder is not None:
             grip = estimate_in_hand(
                 obs.T_world_needle,
@@ -351,6 +364,15 @@ class LocalizeNeedle(Skill):
                 reasons.append(f"answer disagrees with the grasp: {detail}")
                 return None
         return obs
+
+    def _keep_evidence(self, unseen_eye: str | None) -> None:
+        """Keep what this look saw of an uncalibrated holder's needle for ``narrow_offsets``."""
+        if self.holder is None:
+            return
+        arm = self.context.arm(self.holder)
+        if not arm.calibrated:
+            q = arm.servo.estimated_jp().copy()
+            self._evidence.append((q, unseen_eye, self.context.sensor.seen_pixels()))
 
     def _held_face(self, T_world_tip: np.ndarray) -> np.ndarray:
         """The needle's z axis (world) as the holder's grasp holds it: the believed in-hand

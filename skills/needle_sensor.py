@@ -193,6 +193,12 @@ class VisionNeedleSensor:
         left, right = self.hits(T_world_needle, angles)
         return tuple(float(h.mean()) if len(h) else 0.0 for h in (left, right))
 
+    def seen_pixels(self) -> tuple[np.ndarray, np.ndarray]:
+        """Where the network saw needle in the last frame (full-resolution px per eye)."""
+        if self.last_frame is None:
+            return np.zeros((0, 2)), np.zeros((0, 2))
+        return self.localizer.seen_pixels(self.last_frame.left.shape[0])
+
     def hits(self, T_world_needle: np.ndarray, angles: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """Per sample of the arc at ``angles`` of a predicted pose: seen as metal (left, right)."""
         if self.last_frame is None:

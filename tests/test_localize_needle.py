@@ -63,6 +63,9 @@ class _Sensor:
         self.looks += 1
         return NeedleObservation(T, 0.0, 0.5, 0.3, "vision")
 
+    def seen_pixels(self):
+        return np.zeros((0, 2)), np.zeros((0, 2))  # no image: no offset evidence
+
 
 def _turned(needle: NeedleModel, T_needle: np.ndarray, rotvec_deg) -> np.ndarray:
     """``T_needle`` turned by ``rotvec_deg`` (needle frame) about the held point (arc 150°)."""

@@ -37,6 +37,10 @@ class OracleNeedleSensor:
         share = float(hits.mean()) if len(hits) else 0.0
         return share, share
 
+    def seen_pixels(self) -> tuple[np.ndarray, np.ndarray]:
+        """No image evidence: the oracle answers from the truth, never refuses."""
+        return np.zeros((0, 2)), np.zeros((0, 2))
+
     def hits(self, T_world_needle: np.ndarray, angles: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """Per predicted arc sample: within 0.5 mm of the true needle's centre-line."""
         from suture_bt.geometry import NeedleModel

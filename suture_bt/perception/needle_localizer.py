@@ -248,6 +248,9 @@ class NeedleLocalizer:
         self.fitter = PoseFitter(stereo, self.model, depth_range=(MIN_DEPTH, MAX_DEPTH))
         self.input_width = INPUT_SIZE[0]
         self.coarse_threshold = 0.3
+        #: The last call's network output (coarse probabilities, scale), kept whether or not
+        #: it answered: a refusal still says where in the images needle was seen.
+        self.last_network: tuple[np.ndarray, float] | None = None
 
     def network(self, left: np.ndarray, right: np.ndarray):
         """Coarse mask probabilities (2, h, w), keypoints (2, 2, 2) in full-res px, scores."""
@@ -330,6 +333,7 @@ class NeedleLocalizer:
                 )
         t0 = time.perf_counter()
         prob, kp, raw_score, scale = self.network(left, right)
+        self.last_network = (prob, scale)
         t1 = time.perf_counter()
         score = self._plausible(kp, raw_score)
         ends, depth = self._ends_and_depth(kp, score)
@@ -380,6 +384,19 @@ class NeedleLocalizer:
             priors=priors,
             exposure=exposure,
         )
+
+    def seen_pixels(self, image_height: int) -> tuple[np.ndarray, np.ndarray]:
+        """Full-resolution pixels (N×2, u v) where the last call's network saw needle, per
+        eye (each coarse pixel over the threshold, at its centre); empty before any call."""
+        if self.last_network is None:
+            return np.zeros((0, 2)), np.zeros((0, 2))
+        prob, scale = self.last_network
+        h = int(round(image_height / scale))
+        out = []
+        for eye in (0, 1):
+            ys, xs = np.nonzero(prob[eye][:h] > self.coarse_threshold)
+            out.append((np.column_stack([xs, ys]) + 0.5) * scale - 0.5)
+        return out[0], out[1]
 
     def _exposure(self, images, views, T_cam: np.ndarray, priors) -> ArcExposure:
         """The fitted arc's unseen, unhidden stretches; NeedleNotFound when both eyes show a
