@@ -16,6 +16,7 @@ from suture_bt.skills.grasps import free_angle, held_arc_angle, insertion_grasp_
 from suture_bt.skills.handover import Handover
 from suture_bt.skills.in_hand_check import CheckInHand
 from suture_bt.skills.insert import Insert
+from suture_bt.skills.lay_down import LayDown
 from suture_bt.skills.localize_needle import LocalizeNeedle
 from suture_bt.skills.pick_up import PickUp
 from suture_bt.skills.recover import BackOut, OpenAndBackOff
@@ -142,6 +143,18 @@ class FindDroppedNeedle(SkillBehaviour):
 
     def make_skill(self):
         return FindDropped(self.context, self.picker, self.angle(self.context))
+
+
+class LayDownNeedle(SkillBehaviour):
+    """Fallback when the needle in ``arm``'s jaw cannot be localised: lay it on the tissue
+    where ``arm`` can pick it up again at ``angle(context)``, and let go."""
+
+    def __init__(self, arm: str, angle: AngleRule, name: str | None = None):
+        super().__init__(name or f"{arm.upper()} lays the needle on the tissue")
+        self.arm, self.angle = arm, angle
+
+    def make_skill(self):
+        return LayDown(self.context, self.arm, self.angle(self.context))
 
 
 # ------------------------------------------------------------------ angle rules

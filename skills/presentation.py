@@ -32,6 +32,7 @@ from suture_bt.kinematics import UnreachablePoseError, inverse_kinematics
 from suture_bt.planning import to_base
 from suture_bt.skills.context import ArmHandle, TaskContext
 from suture_bt.skills.grasps import GRASP_DEPTH
+from suture_bt.skills.line_of_sight import hidden_by_own_tool
 from suture_bt.skills.motion import feasible
 from suture_bt.skills.tip_uncertainty import offset_displacements, tip_displacements, tip_margin
 from suture_bt.transforms import make_transform
@@ -91,6 +92,12 @@ FACE_ON_DEG = 45.0
 #: Task 3 start has no others), one that faces the cameras goes before one that does not when
 #: its needle stands no more than this much lower (m).
 FACE_ON_WORTH = 0.005
+#: Share of the held needle's possible places the holder's own shaft and clevis may hide
+#: (:func:`~suture_bt.skills.line_of_sight.hidden_by_own_tool`) before a pose goes after those
+#: that hide less: on dev trials whose presentations all failed, the true needle was 27-100 %
+#: hidden behind the wrist (a needle hanging below it, the shaft coming toward the cameras),
+#: and 0 % in the looks that answered.
+HIDDEN_MAX = 0.15
 #: How many poses :func:`choose` returns (a skill presents them in turn until one answers).
 CHOSEN = 7
 #: Presentation points whose poses are taken in turn (a refusal moves to the next point).
@@ -120,11 +127,11 @@ def presentation_point(ctx: TaskContext) -> np.ndarray:
     return presentation_points(ctx)[0]
 
 
-def needle_places(ctx: TaskContext, arm: ArmHandle, T_tip: np.ndarray) -> np.ndarray:
-    """World points where the held needle may be with the jaw at ``T_tip`` (before any offset
-    displacement): its believed arc, or, unknown, the pinch point and the whole circle on
-    either side of the jaw (the jaw holds the wire along tip x, the centre lies one radius
-    along ±tip y)."""
+def needle_place_sets(ctx: TaskContext, arm: ArmHandle, T_tip: np.ndarray) -> list[np.ndarray]:
+    """The places the held needle may be with the jaw at ``T_tip`` (world points, before any
+    offset displacement), one set per way it may be held: its believed arc, or, unknown, the
+    whole circle on either side of the jaw (the jaw holds the wire along tip x, the centre
+    lies one radius along ±tip y), each with the pinch point."""
     b = ctx.belief
     r = ctx.needle.radius
     if b is not None and b.holder == arm.name and b.T_tip_needle is not None:
@@ -132,17 +139,27 @@ def needle_places(ctx: TaskContext, arm: ArmHandle, T_tip: np.ndarray) -> np.nda
         arc = ctx.needle.point_at(
             np.linspace(ctx.needle.tip_angle, ctx.needle.base_angle, ARC_SAMPLES)
         )
-        return arc @ T_needle[:3, :3].T + T_needle[:3, 3]
+        return [arc @ T_needle[:3, :3].T + T_needle[:3, 3]]
     pinch = T_tip[:3, 3] - GRASP_DEPTH * T_tip[:3, 2]
     a = np.linspace(0.0, 2 * np.pi, CIRCLE_SAMPLES, endpoint=False)
     ring = r * (np.cos(a)[:, None] * T_tip[:3, 0] + np.sin(a)[:, None] * T_tip[:3, 1])
-    pts = [pinch[None]]
-    for s in (1.0, -1.0):
-        pts.append(pinch + s * r * T_tip[:3, 1] + ring)
-    return np.vstack(pts)
+    return [np.vstack([pinch[None], pinch + s * r * T_tip[:3, 1] + ring]) for s in (1.0, -1.0)]
 
 
-def _displacements(
+def needle_places(ctx: TaskContext, arm: ArmHandle, T_tip: np.ndarray) -> np.ndarray:
+    """All the world points of :func:`needle_place_sets`."""
+    return np.vstack(needle_place_sets(ctx, arm, T_tip))
+
+
+def hidden_share(ctx: TaskContext, arm: ArmHandle, T_tip: np.ndarray, q: np.ndarray) -> float:
+    """How much of the held needle the holder's own tool may hide at joints ``q`` (tip
+    ``T_tip``): the worst of the ways it may be held (an unknown side of the jaw counts as
+    hidden when either side is)."""
+    base = arm.base_frame()
+    return max(hidden_by_own_tool(ctx, base, q, P) for P in needle_place_sets(ctx, arm, T_tip))
+
+
+def displacements(
     arm: ArmHandle, q: np.ndarray | None, offsets: np.ndarray | None = None
 ) -> np.ndarray:
     """World tip displacements at joints ``q`` (zero if calibrated): of ``offsets``, else of
@@ -168,7 +185,7 @@ def needle_clearance(ctx: TaskContext, arm: ArmHandle, T_tip: np.ndarray) -> flo
     """Least height (m) of the held needle above the tissue with the jaw at ``T_tip``, over its
     possible places and the tip displacements an uncalibrated arm may have there."""
     q = _ik(arm, T_tip, arm.servo.setpoint_jp())
-    return clearance_at(ctx, arm, T_tip, _displacements(arm, q))
+    return clearance_at(ctx, arm, T_tip, displacements(arm, q))
 
 
 def in_view(ctx: TaskContext, points_world: np.ndarray, margin_px: float = VIEW_MARGIN_PX) -> bool:
@@ -259,7 +276,7 @@ def _safe_by_point(
                 shaft = _ik(arm, T, q_now)
                 if shaft is None:
                     continue
-                d_shaft = _displacements(arm, shaft, offsets)
+                d_shaft = displacements(arm, shaft, offsets)
                 jaw = height_above_tissue(ctx.phantom, point + d_shaft)
                 if jaw[0] < MIN_PINCH_CLEARANCE or np.min(jaw) < MIN_NEEDLE_CLEARANCE:
                     break  # the jaw too low here, however it is turned
@@ -274,9 +291,10 @@ def _safe_by_point(
             if q is None:
                 continue
             # The corners again at the pose's own joints; a grid a look left, as at the shaft.
-            d = d_shaft if offsets is not None else _displacements(arm, q)
+            d = d_shaft if offsets is not None else displacements(arm, q)
             wrist = abs(q[4]) + abs(q[5]) + 0.3 * abs(q[3] - q_now[3])
-            bend = (not face_on(ctx, arm, T), wrist, len(best), T)
+            hidden = hidden_share(ctx, arm, T, q) > HIDDEN_MAX
+            bend = (hidden, not face_on(ctx, arm, T), wrist, len(best), T)
             if clearance_at(ctx, arm, T, d) < MIN_NEEDLE_CLEARANCE:
                 later.append((-clear, T))
             elif not in_view(ctx, (places[:, None, :] + VIEW_SHARE * d).reshape(-1, 3)):
@@ -285,8 +303,8 @@ def _safe_by_point(
                 best.append(bend)
         yield (
             bool(best),
-            [T for *_, T in sorted(best, key=lambda c: c[:3])]
-            + [T for *_, T in sorted(seen_as_planned, key=lambda c: c[:3])],
+            [T for *_, T in sorted(best, key=lambda c: c[:4])]
+            + [T for *_, T in sorted(seen_as_planned, key=lambda c: c[:4])],
         )
 
 

@@ -220,7 +220,9 @@ def test_a_known_grasp_is_judged_by_its_arc():
     arc = needle_places(ctx, arm, T)
     assert len(arc) == 9
     assert np.linalg.norm(arc - pinch(T), axis=1).max() <= 2 * ctx.needle.radius + 1e-9
-    assert needle_clearance(ctx, arm, T) >= unknown - 1e-12  # the arc is part of the circle
+    # The arc is part of the circle (sampled at 16 points: its lowest point may lie up to
+    # r·(1 − cos(π/16)) = 0.2 mm below the lowest sample).
+    assert needle_clearance(ctx, arm, T) >= unknown - 2e-4
 
 
 def test_candidate_poses_do_not_command_the_arm():

@@ -157,13 +157,13 @@ def test_needle_dropped_while_presented_at_the_start_is_picked_up_and_the_prepar
     session.world.faults.drop("psm2")
     throw = finish(session)
     assert ran(session, "Retry: prepare after a drop") == [
-        (1, "Unless both arms are ready", Status.FAILURE),
+        (1, "Unless both arms are ready (after a drop)", Status.FAILURE),
         (1, "Pick-up after a drop in preparation (time limit)", Status.SUCCESS),
-        (2, "Unless both arms are ready", Status.SUCCESS),
+        (2, "Unless both arms are ready (after a drop)", Status.SUCCESS),
     ]
     retry = node(session, "Retry: prepare after a drop")
     assert "needle dropped by psm2" in retry.history[0][3]
-    assert node(session, "Unless both arms are ready").feedback_message.startswith(
+    assert node(session, "Unless both arms are ready (after a drop)").feedback_message.startswith(
         "skipped: psm1, psm2 calibrated and psm2 already holds the needle"
     )
     reports = session.context.reports
@@ -171,7 +171,7 @@ def test_needle_dropped_while_presented_at_the_start_is_picked_up_and_the_prepar
     assert done[:4] == [
         ("Calibrate PSM1", "SUCCESS"),
         ("Find the dropped needle", "SUCCESS"),
-        ("Calibrate PSM2 (needle on the tissue)", "SUCCESS"),
+        ("Calibrate PSM2 (needle dropped)", "SUCCESS"),
         ("PSM2 picks the dropped needle up (preparation)", "SUCCESS"),
     ]
     assert not any(r["skill"] == "hand over" for r in reports)

@@ -38,6 +38,7 @@ from suture_bt.behaviours.actions import (
     FindDroppedNeedle,
     HandOver,
     InsertNeedle,
+    LayDownNeedle,
     Localize,
     OpenAndBackOffArm,
     PickUpNeedle,
@@ -48,6 +49,7 @@ from suture_bt.behaviours.actions import (
 from suture_bt.behaviours.conditions import (
     CalibrationLost,
     GraspMissed,
+    JawHoldsSomething,
     NeedleDropped,
     NeedleLocalised,
     NeedleStillHeld,
@@ -116,15 +118,26 @@ def prepare(pairs: tuple[int, ...]) -> py_trees.behaviour.Behaviour:
 def prepared_despite_a_drop(
     from_jaw: py_trees.behaviour.Behaviour, grasp
 ) -> py_trees.behaviour.Behaviour:
-    """The preparation from PSM2's jaw with the needle watched: a drop (during a
-    presentation, a handover, PSM2's calibration) is recovered from the tissue: the needle
-    found where it fell, PSM2 calibrated if it is not yet, and PSM2 picks it up at ``grasp``;
-    the retry then finds both arms ready and skips the rest."""
+    """The preparation from PSM2's jaw with the needle watched, and two ways to finish it from
+    the tissue instead: a drop (during a presentation, a handover, PSM2's calibration) is
+    recovered by finding the needle where it fell; a preparation that failed with the needle
+    still in PSM2's jaw (not localised in any presentation) lays it down on the tissue. Either
+    way PSM2 is calibrated if it is not yet and picks the needle up at ``grasp``, and the
+    retried preparation finds both arms ready and skips the rest."""
     watched = ParallelWithReason(
         "Prepare from PSM2's jaw, needle watched",
         policy=py_trees.common.ParallelPolicy.SuccessOnSelected([from_jaw], synchronise=False),
         children=[NeedleStillHeld(), from_jaw],
         voice=1,
+    )
+    lay_down = py_trees.composites.Sequence(
+        "Lay the needle on the tissue and pick it up",
+        memory=True,
+        children=[
+            JawHoldsSomething(INSERTER, name="Needle still in PSM2's jaw?"),
+            LayDownNeedle(INSERTER, grasp),
+            *calibrated_pick_up(grasp, "laid down"),
+        ],
     )
     pick_up = py_trees.composites.Sequence(
         "Pick up the needle dropped in preparation",
@@ -132,25 +145,41 @@ def prepared_despite_a_drop(
         children=[
             NeedleDropped(),
             FindDroppedNeedle(INSERTER, grasp),
-            SkipWhen(
-                "Unless PSM2 is calibrated",
-                Calibrate(INSERTER, name="Calibrate PSM2 (needle on the tissue)"),
-                calibrated(INSERTER),
-            ),
-            PickUpNeedle(INSERTER, grasp, name="PSM2 picks the dropped needle up (preparation)"),
+            *calibrated_pick_up(grasp, "dropped"),
         ],
     )
-    return recovery_idiom(
-        "Retry: prepare after a drop",
+    ready = prepared(INSERTER, (PULLER, INSERTER))
+    laid_down = recovery_idiom(
+        "Retry: prepare after laying the needle down",
         SkipWhen(
             "Unless both arms are ready",
             SimTimeout("Prepare (time limit)", watched, PREPARE_LIMIT),
-            prepared(INSERTER, (PULLER, INSERTER)),
+            ready,
         ),
+        SimTimeout("Lay down and pick up (time limit)", lay_down, PICK_UP_LIMIT),
+        RETRIES,
+        blame_recovery=True,
+    )
+    return recovery_idiom(
+        "Retry: prepare after a drop",
+        SkipWhen("Unless both arms are ready (after a drop)", laid_down, ready),
         SimTimeout("Pick-up after a drop in preparation (time limit)", pick_up, PICK_UP_LIMIT),
         RETRIES,
         blame_recovery=True,
     )
+
+
+def calibrated_pick_up(grasp, how: str) -> list[py_trees.behaviour.Behaviour]:
+    """PSM2, its jaw empty, calibrates unless it is calibrated, then picks the needle (``how``:
+    "dropped", "laid down") up from the tissue at ``grasp``."""
+    return [
+        SkipWhen(
+            f"Unless PSM2 is calibrated ({how})",
+            Calibrate(INSERTER, name=f"Calibrate PSM2 (needle {how})"),
+            calibrated(INSERTER),
+        ),
+        PickUpNeedle(INSERTER, grasp, name=f"PSM2 picks the {how} needle up (preparation)"),
+    ]
 
 
 def calibrate_psm2_via_psm1(

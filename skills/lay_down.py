@@ -1,0 +1,157 @@
+"""Skill: lay a held needle down on the tissue, where it can be seen and picked up again.
+
+The fallback when a needle in an (uncalibrated) arm's jaw cannot be localised where it is held:
+the arm lays it flat on the tissue and lets go, so the tree can calibrate the arm with its
+jaw empty and pick the needle up from the tissue (:mod:`pick_up`), which works whatever the
+offsets (localising a resting needle needs no presentation). The spot is chosen from the
+phantom's known frame and the camera model: on the flat tissue top beside the ridge, where a
+needle lying around it is in both cameras' view and the arm can both reach the release pose
+and come down on the needle from above. The jaws point straight down, so a needle held across
+them (every grasp of the task) lies level with its z axis up: the pick-up's driving hand takes
+it. The release height keeps the needle clear of the tissue under every tip displacement the
+arm's offsets may still cause. Output: no belief (the needle lies somewhere around the spot).
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from suture_bt.geometry.phantom import TISSUE_TOP_Z
+from suture_bt.geometry.tissue_surface import height_above_tissue
+from suture_bt.kinematics import UnreachablePoseError, inverse_kinematics
+from suture_bt.planning import to_base
+from suture_bt.skills import presentation
+from suture_bt.skills.base import Skill, SkillFailure, Waiting
+from suture_bt.skills.context import ArmHandle, TaskContext
+from suture_bt.skills.grasps import GRASP_DEPTH, hand
+from suture_bt.skills.motion import FINE, feasible, jaw_to, move_to, wait
+from suture_bt.skills.pick_up import grasp_path
+from suture_bt.skills.recover import JAW_OPEN
+from suture_bt.transforms import make_transform
+
+#: Spots tried (phantom frame, m: x across the ridge, y along it), the first that works wins:
+#: beside the ridge on the entries' side, where the SRC's own resting needle lies.
+SPOTS_X = (-0.020, -0.026, -0.015, 0.020, 0.026)
+SPOTS_Y = (0.030, 0.012, 0.045, -0.008, 0.056, -0.025)
+#: Rolls (about the downward jaw axis) tried for the release pose (rad).
+ROLLS = np.deg2rad(np.arange(0.0, 360.0, 30.0))
+#: Clearance of the held needle above the tissue at the release, past the offset
+#: displacements (m); the fall is this plus whatever displacement did not happen.
+RELEASE_CLEARANCE = 0.004
+#: The arm comes to the release pose from this far above it, and rises this far after (m).
+ABOVE = 0.015
+#: The needle is given this long to come to rest (s).
+SETTLE_S = 0.4
+#: Needle orientations about the vertical (rad) whose pick-up must be in reach.
+PICK_YAWS = np.deg2rad(np.arange(0.0, 360.0, 60.0))
+
+
+def _spot_frames(ctx: TaskContext) -> list[np.ndarray]:
+    """Needle poses lying flat (z up) centred at each spot on the tissue top (world)."""
+    T_ph = ctx.phantom.T_world_phantom
+    out = []
+    for x in SPOTS_X:
+        for y in SPOTS_Y:
+            T = np.eye(4)
+            T[:3, 3] = (x, y, TISSUE_TOP_Z + ctx.needle.wire_radius)
+            out.append(T_ph @ T)
+    return out
+
+
+def _turned(T: np.ndarray, yaw: float) -> np.ndarray:
+    c, s = np.cos(yaw), np.sin(yaw)
+    return T @ make_transform(np.array([[c, -s, 0.0], [s, c, 0.0], [0.0, 0.0, 1.0]]), np.zeros(3))
+
+
+def release_pose(ctx: TaskContext, arm: ArmHandle, T_spot: np.ndarray) -> np.ndarray | None:
+    """The tip pose that lets go of the needle over ``T_spot``: jaws straight down (tip z
+    against the phantom's up), the pinch point over the spot's centre offset by the needle's
+    radius (the jaw holds the wire, not the centre), high enough under the arm's offsets; the
+    roll nearest the arm's present one that it reaches. None when none is reachable."""
+    up = ctx.phantom.T_world_phantom[:3, 2]
+    q_now = arm.servo.setpoint_jp()
+    best = None
+    for roll in ROLLS:
+        x = _turned(T_spot, roll)[:3, 0]
+        y = np.cross(-up, x)
+        R = np.column_stack([x, y, -up])
+        # The needle lies beside the pinch, one radius along the jaw's y (the driving hand).
+        pinch = T_spot[:3, 3] - ctx.needle.radius * y
+        T = make_transform(R, pinch - GRASP_DEPTH * R[:, 2])
+        try:
+            q = inverse_kinematics(to_base(T, arm.base_frame()), q_now)
+        except UnreachablePoseError:
+            continue
+        low = presentation.displacements(arm, q) @ up
+        T[:3, 3] += (RELEASE_CLEARANCE + max(0.0, -float(np.min(low)))) * up
+        if feasible(arm, [T]):
+            continue
+        turn = abs(float(np.angle(np.exp(1j * (q[3] - q_now[3])))))
+        if best is None or turn < best[0]:
+            best = (turn, T)
+    return None if best is None else best[1]
+
+
+class LayDown(Skill):
+    """``arm`` lays the needle it holds on the tissue and lets go; ``arc_angle`` (rad) is the
+    grasp the pick-up after it will take (its reach is checked for the spot)."""
+
+    name = "lay down"
+
+    def __init__(self, context: TaskContext, arm: str, arc_angle: float):
+        super().__init__(context)
+        self.arm_name, self.arc_angle = arm, float(arc_angle)
+
+    def program(self) -> Waiting:
+        ctx = self.context
+        arm = ctx.arm(self.arm_name)
+        if ctx.holder() != arm.name:
+            raise SkillFailure(f"lay down: {arm.name} is not known to hold the needle")
+        T_spot, T_release = self._choose_spot(arm)
+        up = ctx.phantom.T_world_phantom[:3, 2]
+        T_above = T_release.copy()
+        T_above[:3, 3] += ABOVE * up
+        self.report.update(
+            spot=T_spot[:3, 3].tolist(),
+            release_height_mm=float(
+                1e3 * (height_above_tissue(ctx.phantom, T_release[:3, 3][None])[0])
+            ),
+        )
+        self.say(f"{arm.name} lays the needle down at {np.round(1e3 * T_spot[:3, 3], 1)} mm")
+        yield from move_to(
+            ctx.clock, arm, presentation.lifted_first(ctx, arm, T_above), "go over the spot"
+        )
+        yield from move_to(ctx.clock, arm, [T_release], "come down to the release", FINE)
+        yield from jaw_to(arm, JAW_OPEN)
+        ctx.belief = None
+        ctx.start_holder = None
+        yield from move_to(ctx.clock, arm, [T_above], "rise clear of the needle", FINE)
+        yield from wait(ctx.clock, SETTLE_S)
+        self.say(f"{arm.name} let the needle go over the tissue")
+
+    def _choose_spot(self, arm: ArmHandle) -> tuple[np.ndarray, np.ndarray]:
+        """The first spot whose needle is in view, whose release pose the arm reaches and
+        from which it can pick the needle up again however it lands (about the vertical)."""
+        ctx = self.context
+        T_hand = hand(ctx.needle, self.arc_angle)
+        circle = ctx.needle.point_at(np.linspace(0.0, 2 * np.pi, 16, endpoint=False))
+        reasons = []
+        for T_spot in _spot_frames(ctx):
+            pts = circle @ T_spot[:3, :3].T + T_spot[:3, 3]
+            if not presentation.in_view(ctx, pts):
+                reasons.append("out of view")
+                continue
+            T_release = release_pose(ctx, arm, T_spot)
+            if T_release is None:
+                reasons.append("no release pose in reach")
+                continue
+            picks = [grasp_path(ctx, _turned(T_spot, yaw), T_hand) for yaw in PICK_YAWS]
+            why = next((w for w in (feasible(arm, p) for p in picks) if w), "")
+            if why:
+                reasons.append(f"pick-up out of reach ({why})")
+                continue
+            return T_spot, T_release
+        raise SkillFailure(
+            f"lay down: no spot on the tissue where {arm.name} can lay the needle and pick it "
+            f"up again ({'; '.join(sorted(set(reasons)))})"
+        )
