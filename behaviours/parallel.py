@@ -9,6 +9,8 @@ import py_trees
 from py_trees.behaviour import Behaviour
 from py_trees.common import Status
 
+from suture_bt.behaviours.throw_scope import failure_reason
+
 
 class ParallelWithReason(py_trees.composites.Parallel):
     """A Parallel whose feedback is a failed child's (``name: feedback``), else the feedback
@@ -28,5 +30,7 @@ class ParallelWithReason(py_trees.composites.Parallel):
     def _said(self) -> str:
         for child in self.children:
             if child.status == Status.FAILURE:
-                return f"{child.name}: {child.feedback_message or 'failed'}"
+                if child.feedback_message:
+                    return f"{child.name}: {child.feedback_message}"
+                return f"{child.name}: {failure_reason(child)}"  # a composite says nothing
         return self.children[self.voice].feedback_message if self.children else ""

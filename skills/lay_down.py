@@ -42,8 +42,10 @@ RELEASE_CLEARANCE = 0.004
 ABOVE = 0.015
 #: The needle is given this long to come to rest (s).
 SETTLE_S = 0.4
-#: Needle orientations about the vertical (rad) whose pick-up must be in reach.
-PICK_YAWS = np.deg2rad(np.arange(0.0, 360.0, 60.0))
+#: Needle orientations about the vertical (rad) of which at least ``PICK_SHARE`` must have
+#: their pick-up in reach (how it lies about the vertical depends on the unknown grasp).
+PICK_YAWS = np.deg2rad(np.arange(0.0, 360.0, 30.0))
+PICK_SHARE = 0.75
 
 
 def _spot_frames(ctx: TaskContext) -> list[np.ndarray]:
@@ -77,7 +79,7 @@ def release_pose(ctx: TaskContext, arm: ArmHandle, T_spot: np.ndarray) -> np.nda
         R = np.column_stack([x, y, -up])
         # The needle lies beside the pinch, one radius along the jaw's y (the driving hand).
         pinch = T_spot[:3, 3] - ctx.needle.radius * y
-        T = make_transform(R, pinch - GRASP_DEPTH * R[:, 2])
+        T = make_transform(R, pinch + GRASP_DEPTH * R[:, 2])  # the tip is ahead of the pinch
         try:
             q = inverse_kinematics(to_base(T, arm.base_frame()), q_now)
         except UnreachablePoseError:
@@ -146,12 +148,13 @@ class LayDown(Skill):
                 reasons.append("no release pose in reach")
                 continue
             picks = [grasp_path(ctx, _turned(T_spot, yaw), T_hand) for yaw in PICK_YAWS]
-            why = next((w for w in (feasible(arm, p) for p in picks) if w), "")
-            if why:
-                reasons.append(f"pick-up out of reach ({why})")
+            whys = [w for w in (feasible(arm, p) for p in picks) if w]
+            if len(whys) > len(PICK_YAWS) * (1.0 - PICK_SHARE):
+                reasons.append(f"pick-up out of reach ({whys[0]})")
                 continue
             return T_spot, T_release
+        kinds = {r.split(" (")[0]: r for r in reasons}  # one example of each kind
         raise SkillFailure(
             f"lay down: no spot on the tissue where {arm.name} can lay the needle and pick it "
-            f"up again ({'; '.join(sorted(set(reasons)))})"
+            f"up again ({'; '.join(kinds.values())})"
         )

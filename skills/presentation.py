@@ -14,8 +14,9 @@ surface under it (the flat top and the ridge of the ports,
 whole circle on either side of the jaw; each moved by every tip displacement the task's offset
 bound allows an uncalibrated arm (at the Task 3 start up to about 20 mm: such an arm presents
 higher and beside the ridge). Safe poses that keep the needle in view under half those
-displacements come first (nearest point, then a believed needle facing the cameras, then least
-wrist bend), then other safe ones, then the rest, highest first. Everything is derived from the
+displacements come first (nearest point, then those whose own shaft and clevis would not hide
+the needle, then a believed needle facing the cameras, then least wrist bend), then other safe
+ones, then the rest, highest first. Everything is derived from the
 camera model, the port frames and the arm's joints, so a moved, rotated or tilted phantom works
 the same.
 """

@@ -179,6 +179,42 @@ def test_needle_dropped_while_presented_at_the_start_is_picked_up_and_the_prepar
     assert passed(session), session.scores()[0].failure
 
 
+@pytest.mark.slow
+def test_a_needle_not_localised_in_psm2s_jaw_is_laid_down_and_picked_up(session):
+    # Every frame of the start's localisation is lost: no presentation answers. PSM2 lays the
+    # needle on the tissue, calibrates with its jaw empty and picks it up at the throw's grasp.
+    from suture_bt.skills.localize_needle import MAX_PRESENTATIONS_UNCALIBRATED
+    from suture_bt.skills.needle_sensor import MAX_BAD_FRAMES
+
+    present = node(session, "Localize needle in PSM2")
+    assert session.run_until(lambda s: present.status == Status.RUNNING) is not None
+    session.world.faults.lose_frames(MAX_PRESENTATIONS_UNCALIBRATED * MAX_BAD_FRAMES)
+    throw = finish(session)
+    assert ran(session, "Retry: prepare after laying the needle down") == [
+        (1, "Unless both arms are ready", Status.FAILURE),
+        (1, "Lay down and pick up (time limit)", Status.SUCCESS),
+        (2, "Unless both arms are ready", Status.SUCCESS),
+    ]
+    retry = node(session, "Retry: prepare after laying the needle down")
+    assert "needle held by psm2 not localised: 3 frames lost in a row" in retry.history[0][3]
+    done = [(r["behaviour"], r["status"]) for r in session.context.reports]
+    assert done[:5] == [
+        ("Calibrate PSM1", "SUCCESS"),
+        ("Localize needle in PSM2", "FAILURE"),
+        ("PSM2 lays the needle on the tissue", "SUCCESS"),
+        ("Calibrate PSM2 (needle laid down)", "SUCCESS"),
+        ("PSM2 picks the laid down needle up (preparation)", "SUCCESS"),
+    ]
+    assert throw["status"] == "SUCCESS", throw["reason"]
+    assert passed(session), session.scores()[0].failure
+    # Laid on the tissue, never into it: any other entry is the resting wire's contact.
+    from suture_bt.evaluation.throw_scores import CONTACT_DEPTH
+
+    entries = GroundTruth(session.world).tissue_entries()
+    assert [e.nearest_port for e in entries][-1:] == ["entry1"]
+    assert all(e.depth_max < CONTACT_DEPTH for e in entries[:-1])
+
+
 #: On the floor beyond the phantom's near edge: in the cameras' view, out of both arms' reach.
 OUT_OF_REACH = (0.0, -0.12, 0.0421)
 

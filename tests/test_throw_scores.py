@@ -169,6 +169,16 @@ def test_stab_distance_is_from_the_throws_own_entry_port_when_ports_are_known():
     assert s.stab_mm == pytest.approx(19.0) and "stab 19.0 mm from entry2" in s.failure
 
 
+def test_a_needle_resting_on_the_tissue_is_contact_not_a_stab():
+    xs, es = good_throw(1, 10.0)
+    resting = E(2.0, "entry2", 0.04, depth_max=0.1e-3)  # laid down, pressed in 0.1 mm
+    (s,) = score_throws(xs, [*es, resting], {}, {1: (10.0, 15.0)}, pairs=(1,))
+    assert s.passed and s.stab_mm is None
+    pricked = E(2.0, "entry2", 0.04, depth_max=0.8e-3)  # the tip went in deeper: a stab
+    (s,) = score_throws(xs, [*es, pricked], {}, {1: (10.0, 15.0)}, pairs=(1,))
+    assert not s.passed and "stab 40.0 mm from entry2 (nearest port)" in s.failure
+
+
 def test_task3_order():
     crossings, _, _ = four_throws()
     assert task3_order_ok(crossings)

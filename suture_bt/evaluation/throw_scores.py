@@ -10,7 +10,8 @@ collects them from a world's ground truth.
 A throw i passes when, inside its window, the tip crosses Entry_i inward and then Exit_i
 outward, with a lateral distance ≤ 2.5 mm at each crossing, gets ≥ 5 mm out past the exit, and
 goes into the tissue nowhere but at Entry_i (a tissue entry more than 2.5 mm from Entry_i is a
-stab). A tissue entry outside every throw's window (while preparing, or between throws) is
+stab, unless the tip never got ``CONTACT_DEPTH`` in: a needle lying on the tissue, laid down or
+dropped, is pressed into it by about 0.1 mm by the physics contact; that is not a stab). A tissue entry outside every throw's window (while preparing, or between throws) is
 charged to the throw that follows it, or to the last throw: nothing the needle does in the
 tissue goes unscored. Tissue strain over 0.5 mm is reported, not failed.
 """
@@ -26,6 +27,10 @@ import numpy as np
 #: The ±2.5 mm rule: lateral distance at a crossing, and how close a tissue entry must be to
 #: the throw's entry port to count as "at the port" (m).
 PORT_RADIUS = 2.5e-3
+#: A tissue entry whose tip stayed within this distance of where it went in is contact (a
+#: needle resting on the tissue, 0.1 mm in on a dev run), not a stab (m; the wire is 0.72 mm
+#: thick, a stab goes millimetres deep).
+CONTACT_DEPTH = 0.5e-3
 #: The tip must get at least this far out past the exit (m).
 TIP_OUT_MIN = 5e-3
 #: Tissue strain above this is reported (``strain_high``), not failed (m).
@@ -105,7 +110,7 @@ def _stab(
     own_pos = None if port_positions is None else port_positions.get(own)
     worst: tuple[float, str, float] | None = None
     for e in entries:
-        if not _in_window(e.t, window):
+        if not _in_window(e.t, window) or float(getattr(e, "depth_max", 1.0)) < CONTACT_DEPTH:
             continue
         if own_pos is not None:
             d, ref = float(np.linalg.norm(np.asarray(e.point) - np.asarray(own_pos))), own

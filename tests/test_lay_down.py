@@ -1,0 +1,55 @@
+"""Laying a held needle down: a spot in view and in reach, jaws straight down, high enough."""
+
+import numpy as np
+import pytest
+from test_presentation import PHANTOMS, make_arm, make_ctx
+
+from suture_bt.geometry.tissue_surface import height_above_tissue
+from suture_bt.transforms import pose_to_transform
+from suture_bt.skills.grasps import GRASP_DEPTH
+from suture_bt.skills.lay_down import RELEASE_CLEARANCE, LayDown, release_pose
+
+
+#: Phantom poses: default, moved and turned, tilted a few degrees (test_presentation's
+#: "tilted", 11° and 6°, leaves no pick-up from above within the wrist's limits).
+SCENES = {
+    "default": PHANTOMS["default"],
+    "moved": PHANTOMS["moved"],
+    "tilted 3°": pose_to_transform((0.0, 0.005, 0.0), (0.05, 0.03, 0.05)),
+}
+
+
+@pytest.mark.parametrize("phantom", sorted(SCENES))
+def test_the_spot_is_in_view_on_the_tissue_and_the_jaws_point_straight_down(phantom):
+    ctx, arm = make_ctx(SCENES[phantom]), make_arm("psm2")
+    arm.calibrated = True
+    T_spot, T_release = LayDown(ctx, "psm2", np.deg2rad(150.0))._choose_spot(arm)
+    up = ctx.phantom.T_world_phantom[:3, 2]
+    assert T_release[:3, 2] @ up == pytest.approx(-1.0)  # jaws down: the needle lies level
+    assert abs(height_above_tissue(ctx.phantom, T_spot[:3, 3][None])[0]) < 0.001
+    pinch = T_release[:3, 3] - GRASP_DEPTH * T_release[:3, 2]
+    height = height_above_tissue(ctx.phantom, pinch[None])[0]
+    assert RELEASE_CLEARANCE - 1e-6 <= height < RELEASE_CLEARANCE + 0.001  # calibrated
+    # The pinch point is one needle radius from the spot's centre (the jaw holds the wire).
+    flat = (pinch - T_spot[:3, 3]) - ((pinch - T_spot[:3, 3]) @ up) * up
+    assert np.linalg.norm(flat) == pytest.approx(ctx.needle.radius, abs=1e-6)
+
+
+def test_an_uncalibrated_arm_lets_go_higher_by_its_possible_offsets():
+    ctx, arm = make_ctx(), make_arm("psm2")
+    T_spot, _ = LayDown(ctx, "psm2", np.deg2rad(150.0))._choose_spot(arm)
+    high = release_pose(ctx, arm, T_spot)
+    arm.calibrated = True
+    low = release_pose(ctx, arm, T_spot)
+    lift = (high[:3, 3] - low[:3, 3]) @ ctx.phantom.T_world_phantom[:3, 2]
+    assert 0.005 < lift < 0.03  # the tip may be up to ~20 mm lower than its joints say
+
+
+def test_an_arm_that_reaches_no_spot_fails_saying_why(monkeypatch):
+    from suture_bt.skills import lay_down
+    from suture_bt.skills.base import SkillFailure
+
+    ctx, arm = make_ctx(), make_arm("psm2")
+    monkeypatch.setattr(lay_down, "SPOTS_X", (0.5,))  # half a metre off: in no view
+    with pytest.raises(SkillFailure, match="no spot on the tissue where psm2 can lay"):
+        LayDown(ctx, "psm2", np.deg2rad(150.0))._choose_spot(arm)
