@@ -33,14 +33,20 @@ import numpy as np
 import pybullet as p
 
 from suture_bt.geometry.needle import NeedleModel
-from suture_bt.geometry.phantom import PORT_MARK_SIZE, TISSUE_TOP_Z, PhantomModel, Port
+from suture_bt.geometry.phantom import (
+    PORT_MARK_SIZE,
+    TISSUE_TOP_Z,
+    TISSUE_X,
+    TISSUE_Y,
+    PhantomModel,
+    Port,
+)
 from suture_bt.geometry.tissue_surface import RIDGE_END_MARGIN
 from suture_bt.sim.rendering import load_renderer
 from suture_bt.transforms import invert, make_transform, quat_xyzw
 
 #: Flat block: x and y extent (phantom frame, metres) and thickness below ``TISSUE_TOP_Z``.
-BLOCK_X = (-0.045, 0.045)
-BLOCK_Y = (-0.055, 0.075)
+BLOCK_X, BLOCK_Y = TISSUE_X, TISSUE_Y  # the known phantom model's
 BLOCK_THICKNESS = 0.01
 #: Ridge flank slabs: thickness, and how far they reach below the block top (hidden).
 SLAB_THICKNESS = 0.002

@@ -16,11 +16,11 @@ from __future__ import annotations
 
 import numpy as np
 
-from suture_bt.geometry.phantom import TISSUE_TOP_Z
-from suture_bt.geometry.tissue_surface import height_above_tissue
+from suture_bt.geometry.phantom import TISSUE_TOP_Z, TISSUE_X, TISSUE_Y
+from suture_bt.geometry.tissue_surface import height_above_tissue, surface_height
 from suture_bt.kinematics import UnreachablePoseError, inverse_kinematics
 from suture_bt.planning import to_base
-from suture_bt.skills import presentation
+from suture_bt.skills import checks, presentation
 from suture_bt.skills.base import Skill, SkillFailure, Waiting
 from suture_bt.skills.context import ArmHandle, TaskContext
 from suture_bt.skills.grasps import GRASP_DEPTH, hand
@@ -29,10 +29,14 @@ from suture_bt.skills.pick_up import grasp_path
 from suture_bt.skills.recover import JAW_OPEN
 from suture_bt.transforms import make_transform
 
-#: Spots tried (phantom frame, m: x across the ridge, y along it), the first that works wins:
-#: beside the ridge on the entries' side, where the SRC's own resting needle lies.
-SPOTS_X = (-0.020, -0.026, -0.015, 0.020, 0.026)
-SPOTS_Y = (0.030, 0.012, 0.045, -0.008, 0.056, -0.025)
+#: Spots tried (phantom frame, m: x across the ridge, y along it), beside the ridge on either
+#: side (the SRC's own resting needle lies at x = -21 mm, y = 56 mm).
+SPOTS_X = (-0.032, -0.027, -0.022, -0.017, 0.022, 0.027)
+SPOTS_Y = (0.045, 0.030, 0.015, 0.0, -0.015, -0.030)
+#: Least share of the needle's possible landing places that must be flat tissue in view.
+MIN_LANDING_SHARE = 0.5
+#: Landing places this close to the block's edges count as off it (m).
+EDGE_MARGIN = 0.003
 #: Rolls (about the downward jaw axis) tried for the release pose (rad).
 ROLLS = np.deg2rad(np.arange(0.0, 360.0, 30.0))
 #: Clearance of the held needle above the tissue at the release, past the offset
@@ -107,8 +111,10 @@ class LayDown(Skill):
     def program(self) -> Waiting:
         ctx = self.context
         arm = ctx.arm(self.arm_name)
-        if ctx.holder() != arm.name:
-            raise SkillFailure(f"lay down: {arm.name} is not known to hold the needle")
+        angle = arm.jaw_angle()
+        held, detail = checks.jaw_holds_wire(angle)
+        if not held or angle > checks.JAW_CLOSED_MAX:
+            raise SkillFailure(f"lay down: {arm.name}'s jaw holds no needle ({detail})")
         T_spot, T_release = self._choose_spot(arm)
         up = ctx.phantom.T_world_phantom[:3, 2]
         T_above = T_release.copy()
@@ -132,29 +138,67 @@ class LayDown(Skill):
         self.say(f"{arm.name} let the needle go over the tissue")
 
     def _choose_spot(self, arm: ArmHandle) -> tuple[np.ndarray, np.ndarray]:
-        """The first spot whose needle is in view, whose release pose the arm reaches and
-        from which it can pick the needle up again however it lands (about the vertical)."""
+        """The spot where the needle most surely lands flat on the tissue in view: the share of
+        its possible places (a circle two radii round the spot, either side of the jaw, moved
+        by the tip displacements the arm's offsets may still cause) that lie on the flat top
+        (not the ridge, not off the block) and in both images; ties nearest the image centre.
+        Its release pose must be reachable, and the pick-up from at least ``PICK_SHARE`` of
+        the needle's orientations."""
         ctx = self.context
         T_hand = hand(ctx.needle, self.arc_angle)
-        circle = ctx.needle.point_at(np.linspace(0.0, 2 * np.pi, 16, endpoint=False))
-        reasons = []
+        cam = ctx.camera.model.left
+        centre = np.array([cam.width / 2.0, cam.height / 2.0])
+        ring = 2.0 * ctx.needle.point_at(np.linspace(0.0, 2 * np.pi, 12, endpoint=False))
+        ranked, reasons = [], []
         for T_spot in _spot_frames(ctx):
-            pts = circle @ T_spot[:3, :3].T + T_spot[:3, 3]
-            if not presentation.in_view(ctx, pts):
-                reasons.append("out of view")
-                continue
             T_release = release_pose(ctx, arm, T_spot)
             if T_release is None:
                 reasons.append("no release pose in reach")
+                continue
+            q = inverse_kinematics(to_base(T_release, arm.base_frame()), arm.servo.setpoint_jp())
+            moved = presentation.displacements(arm, q)
+            places = ring @ T_spot[:3, :3].T + T_spot[:3, 3]
+            places = (places[:, None, :] + moved[None]).reshape(-1, 3)
+            share = float(np.mean(landing_ok(ctx, places)))
+            if share < MIN_LANDING_SHARE:
+                reasons.append(
+                    f"too little of where it may land is flat tissue in view ({share:.0%})"
+                )
                 continue
             picks = [grasp_path(ctx, _turned(T_spot, yaw), T_hand) for yaw in PICK_YAWS]
             whys = [w for w in (feasible(arm, p) for p in picks) if w]
             if len(whys) > len(PICK_YAWS) * (1.0 - PICK_SHARE):
                 reasons.append(f"pick-up out of reach ({whys[0]})")
                 continue
+            off_centre = float(np.linalg.norm(cam.project(T_spot[:3, 3][None])[0] - centre))
+            ranked.append((-round(share, 2), off_centre, len(ranked), T_spot, T_release))
+        if ranked:
+            *_, T_spot, T_release = min(ranked, key=lambda r: r[:3])
+            self.report["landing_share"] = -min(ranked, key=lambda r: r[:3])[0]
             return T_spot, T_release
         kinds = {r.split(" (")[0]: r for r in reasons}  # one example of each kind
         raise SkillFailure(
             f"lay down: no spot on the tissue where {arm.name} can lay the needle and pick it "
             f"up again ({'; '.join(kinds.values())})"
         )
+
+
+def landing_ok(ctx: TaskContext, points: np.ndarray) -> np.ndarray:
+    """Per world point on the tissue top: on the flat block (not the ridge, not past its
+    edges, ``EDGE_MARGIN`` inside) and inside both images."""
+    T_inv = np.linalg.inv(ctx.phantom.T_world_phantom)
+    local = points @ T_inv[:3, :3].T + T_inv[:3, 3]
+    on_block = (
+        (TISSUE_X[0] + EDGE_MARGIN <= local[:, 0])
+        & (local[:, 0] <= TISSUE_X[1] - EDGE_MARGIN)
+        & (TISSUE_Y[0] + EDGE_MARGIN <= local[:, 1])
+        & (local[:, 1] <= TISSUE_Y[1] - EDGE_MARGIN)
+    )
+    flat = surface_height(ctx.phantom, points) <= TISSUE_TOP_Z + 1e-4
+    seen = np.ones(len(points), bool)
+    for cam in (ctx.camera.model.left, ctx.camera.model.right):
+        uv = cam.project(points)
+        m = presentation.VIEW_MARGIN_PX
+        seen &= (uv[:, 0] >= m) & (uv[:, 1] >= m)
+        seen &= (uv[:, 0] <= cam.width - m) & (uv[:, 1] <= cam.height - m)
+    return on_block & flat & seen

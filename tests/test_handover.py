@@ -6,7 +6,7 @@ import pytest
 
 from suture_bt.runtime.session import RunOptions, Session
 from suture_bt.sim.scene import scene_from_dict
-from suture_bt.skills import localize_needle
+from suture_bt.skills import lay_down, localize_needle
 
 
 @pytest.mark.slow
@@ -20,6 +20,7 @@ def test_a_turned_raised_phantom_leaves_no_pose_on_the_takers_side_so_the_giver_
     # that to 40 % and leaves poses on PSM1's side; kept at the whole bound here, the fallback
     # is what is tested.
     monkeypatch.setattr(localize_needle, "PROVISIONAL_SHARE", 1.0)
+    monkeypatch.setattr(lay_down, "SPOTS_X", (0.5,))  # no spot: the needle is presented
     scene = scene_from_dict(
         {
             "needle": {"start": "in_psm2_jaw"},

@@ -5,10 +5,9 @@ import pytest
 from test_presentation import PHANTOMS, make_arm, make_ctx
 
 from suture_bt.geometry.tissue_surface import height_above_tissue
-from suture_bt.transforms import pose_to_transform
 from suture_bt.skills.grasps import GRASP_DEPTH
 from suture_bt.skills.lay_down import RELEASE_CLEARANCE, LayDown, release_pose
-
+from suture_bt.transforms import pose_to_transform
 
 #: Phantom poses: default, moved and turned, tilted a few degrees (test_presentation's
 #: "tilted", 11° and 6°, leaves no pick-up from above within the wrist's limits).

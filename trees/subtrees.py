@@ -1,9 +1,11 @@
 """Subtrees shared by the suture trees: preparing both arms, and one throw.
 
 SRC Task 3 starts with the needle in PSM2's jaw, and calibration needs an empty jaw. So the
-preparation calibrates PSM1, localises the needle (presented by PSM2), hands it to PSM1,
-calibrates PSM2 and takes it back at the grasp the throws need (its in-hand transform then
-re-estimated from images with a calibrated arm). A throw: PSM2 inserts through the entry,
+preparation calibrates PSM1, and PSM2 lays the needle flat on the tissue where it can take it
+again, calibrates with its jaw empty and picks the needle up at the grasp the throws need
+(localising a needle resting on the tissue needs no presentation; one held in an uncalibrated
+jaw does). When no spot can be used, PSM2 presents the needle instead: it is localised in its
+jaw, handed to PSM1, PSM2 calibrates and takes it back. A throw: PSM2 inserts through the entry,
 PSM1 pulls it through the exit, and (unless it is the last) hands it back to PSM2. Before
 each insertion the needle is looked at over the entry: a slip (the needle seen away from its
 predicted pose, its wire still between the blades) re-estimates the in-hand pose and, when
@@ -81,11 +83,22 @@ RETRIES = 1
 def prepare(pairs: tuple[int, ...]) -> py_trees.behaviour.Behaviour:
     """Calibrate both arms and leave the needle in PSM2's jaw at the grasp ``pairs`` need."""
     grasp = grasp_for_pairs(pairs)
-    from_jaw = py_trees.composites.Sequence(
-        "Prepare from PSM2's jaw",
+    laid_down = py_trees.composites.Sequence(
+        "Prepare by laying the needle down",
         memory=True,
         children=[
             Calibrate(PULLER),
+            LayDownNeedle(INSERTER, grasp),
+            Calibrate(INSERTER, name="Calibrate PSM2 (jaw empty)"),
+            PickUpNeedle(INSERTER, grasp, name="PSM2 picks the laid down needle up"),
+        ],
+    )
+    presented = py_trees.composites.Sequence(
+        "Prepare from PSM2's jaw",
+        memory=True,
+        children=[
+            JawHoldsSomething(INSERTER, name="Needle still in PSM2's jaw?"),
+            SkipWhen("Unless PSM1 is calibrated", Calibrate(PULLER), calibrated(PULLER)),
             Localize(INSERTER),
             *calibrate_psm2_via_psm1(
                 grasp,
@@ -93,6 +106,9 @@ def prepare(pairs: tuple[int, ...]) -> py_trees.behaviour.Behaviour:
                 ("PSM2 hands the needle to PSM1", "Calibrate PSM2", "PSM1 hands it back"),
             ),
         ],
+    )
+    from_jaw = py_trees.composites.Selector(
+        "Lay the needle down, else present it", memory=True, children=[laid_down, presented]
     )
     from_tissue = py_trees.composites.Sequence(
         "Prepare from the tissue",
@@ -118,11 +134,9 @@ def prepare(pairs: tuple[int, ...]) -> py_trees.behaviour.Behaviour:
 def prepared_despite_a_drop(
     from_jaw: py_trees.behaviour.Behaviour, grasp
 ) -> py_trees.behaviour.Behaviour:
-    """The preparation from PSM2's jaw with the needle watched, and two ways to finish it from
-    the tissue instead: a drop (during a presentation, a handover, PSM2's calibration) is
-    recovered by finding the needle where it fell; a preparation that failed with the needle
-    still in PSM2's jaw (not localised in any presentation) lays it down on the tissue. Either
-    way PSM2 is calibrated if it is not yet and picks the needle up at ``grasp``, and the
+    """The preparation from PSM2's jaw with the needle watched: a drop (during the lay-down,
+    a presentation, a handover, PSM2's calibration) is recovered by finding the needle where
+    it fell; PSM2 is calibrated if it is not yet and picks it up at ``grasp``, and the
     retried preparation finds both arms ready and skips the rest."""
     watched = ParallelWithReason(
         "Prepare from PSM2's jaw, needle watched",
@@ -130,56 +144,31 @@ def prepared_despite_a_drop(
         children=[NeedleStillHeld(), from_jaw],
         voice=1,
     )
-    lay_down = py_trees.composites.Sequence(
-        "Lay the needle on the tissue and pick it up",
-        memory=True,
-        children=[
-            JawHoldsSomething(INSERTER, name="Needle still in PSM2's jaw?"),
-            LayDownNeedle(INSERTER, grasp),
-            *calibrated_pick_up(grasp, "laid down"),
-        ],
-    )
     pick_up = py_trees.composites.Sequence(
         "Pick up the needle dropped in preparation",
         memory=True,
         children=[
             NeedleDropped(),
             FindDroppedNeedle(INSERTER, grasp),
-            *calibrated_pick_up(grasp, "dropped"),
+            SkipWhen(
+                "Unless PSM2 is calibrated",
+                Calibrate(INSERTER, name="Calibrate PSM2 (needle dropped)"),
+                calibrated(INSERTER),
+            ),
+            PickUpNeedle(INSERTER, grasp, name="PSM2 picks the dropped needle up (preparation)"),
         ],
-    )
-    ready = prepared(INSERTER, (PULLER, INSERTER))
-    laid_down = recovery_idiom(
-        "Retry: prepare after laying the needle down",
-        SkipWhen(
-            "Unless both arms are ready",
-            SimTimeout("Prepare (time limit)", watched, PREPARE_LIMIT),
-            ready,
-        ),
-        SimTimeout("Lay down and pick up (time limit)", lay_down, PICK_UP_LIMIT),
-        RETRIES,
-        blame_recovery=True,
     )
     return recovery_idiom(
         "Retry: prepare after a drop",
-        SkipWhen("Unless both arms are ready (after a drop)", laid_down, ready),
+        SkipWhen(
+            "Unless both arms are ready",
+            SimTimeout("Prepare (time limit)", watched, PREPARE_LIMIT),
+            prepared(INSERTER, (PULLER, INSERTER)),
+        ),
         SimTimeout("Pick-up after a drop in preparation (time limit)", pick_up, PICK_UP_LIMIT),
         RETRIES,
         blame_recovery=True,
     )
-
-
-def calibrated_pick_up(grasp, how: str) -> list[py_trees.behaviour.Behaviour]:
-    """PSM2, its jaw empty, calibrates unless it is calibrated, then picks the needle (``how``:
-    "dropped", "laid down") up from the tissue at ``grasp``."""
-    return [
-        SkipWhen(
-            f"Unless PSM2 is calibrated ({how})",
-            Calibrate(INSERTER, name=f"Calibrate PSM2 (needle {how})"),
-            calibrated(INSERTER),
-        ),
-        PickUpNeedle(INSERTER, grasp, name=f"PSM2 picks the {how} needle up (preparation)"),
-    ]
 
 
 def calibrate_psm2_via_psm1(

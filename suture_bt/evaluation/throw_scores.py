@@ -11,9 +11,10 @@ A throw i passes when, inside its window, the tip crosses Entry_i inward and the
 outward, with a lateral distance ≤ 2.5 mm at each crossing, gets ≥ 5 mm out past the exit, and
 goes into the tissue nowhere but at Entry_i (a tissue entry more than 2.5 mm from Entry_i is a
 stab, unless the tip never got ``CONTACT_DEPTH`` in: a needle lying on the tissue, laid down or
-dropped, is pressed into it by about 0.1 mm by the physics contact; that is not a stab). A tissue entry outside every throw's window (while preparing, or between throws) is
-charged to the throw that follows it, or to the last throw: nothing the needle does in the
-tissue goes unscored. Tissue strain over 0.5 mm is reported, not failed.
+dropped, is pressed into it by about 0.1 mm by the physics contact; that is not a stab). A
+tissue entry outside every throw's window (while preparing, or between throws) is charged to
+the throw that follows it, or to the last throw: nothing the needle does in the tissue goes
+unscored. Tissue strain over 0.5 mm is reported, not failed.
 """
 
 from __future__ import annotations

@@ -26,6 +26,9 @@ FLANK_PITCH = np.deg2rad(46.1)
 PORT_MARK_SIZE = 0.005
 #: Height of the flat tissue surface (phantom frame) on which the needle rests at start.
 TISSUE_TOP_Z = 0.0713
+#: Extent of the flat tissue block (phantom frame, m): beyond it a needle falls off the phantom.
+TISSUE_X = (-0.045, 0.045)
+TISSUE_Y = (-0.055, 0.075)
 
 
 @dataclass(frozen=True)
