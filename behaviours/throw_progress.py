@@ -20,6 +20,9 @@ from suture_bt.behaviours.skill_behaviour import needs
 from suture_bt.planning import NeedleArcError, plan_needle_arc
 from suture_bt.skills.context import TaskContext
 from suture_bt.skills.grasps import JAW_CLEARANCE
+from suture_bt.skills.insert import LIFT, PRE_ARC
+from suture_bt.skills.motion import feasible
+from suture_bt.transforms import invert
 
 #: Says why a step is already done ('' when it is not).
 DoneCheck = Callable[[TaskContext], str]
@@ -101,6 +104,29 @@ def calibrated(arm: str) -> DoneCheck:
 
     def check(ctx: TaskContext) -> str:
         return f"{arm} is calibrated" if ctx.arm(arm).calibrated else ""
+
+    return check
+
+
+def grasp_reaches(pair: int, arm: str) -> DoneCheck:
+    """'' when ``arm`` cannot bring the needle, as its believed grasp holds it, to the
+    approach poses of ``pair`` (a grasp taken off the tissue can leave the wrist no way to
+    them, though the pair is in reach with the task's grasp: a re-grasp is needed);
+    anything else is left to the in-hand check and the insertion to judge."""
+
+    def check(ctx: TaskContext) -> str:
+        b = ctx.belief
+        if b is None or b.holder != arm or b.T_tip_needle is None:
+            return f"{arm} is not known to hold the needle (the insertion says so)"
+        try:
+            arc = plan_needle_arc(*ctx.phantom.pair(pair), ctx.needle)
+        except NeedleArcError as e:
+            return f"no circle through pair {pair} ({e.reason}; the insertion says so)"
+        T_inv = invert(b.T_tip_needle)
+        poses = [T @ T_inv for T in arc.approach_poses(PRE_ARC, LIFT)]
+        if feasible(ctx.arm(arm), poses):
+            return ""
+        return f"{arm}'s grasp reaches pair {pair}'s approach"
 
     return check
 

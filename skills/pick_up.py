@@ -14,9 +14,10 @@ or down (turned over). The driving hand puts tip z = −needle z, so on a needle
 would come from below the tissue: the skill then takes it with the only hand the geometry
 allows, the same grasp turned half a turn about the wire (tip z = +needle z, jaws from above),
 and says so in its feedback and report (``hand``: "driving" or "turned over"). That grasp is
-not the one the insertion planner drives with, and no hand-over gives it back (both arms take
-a needle from the same side of its plane; checked at 40-120° arc angles): the throws then fail
-saying so.
+not the one the insertion planner drives with: before a throw the tree sees that the wrist
+cannot bring it to the entry (``grasp_reaches``) and re-grasps it through PSM1 (PSM2 → PSM1 →
+PSM2), which gave the driving hand back on both report runs whose laid-down needle flipped
+(an earlier check at 40-120° arc angles had found no handover that does; not re-checked).
 A needle on its edge (no jaw direction within ``MAX_TILT`` of straight down) is refused.
 """
 

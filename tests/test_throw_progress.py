@@ -12,6 +12,7 @@ from suture_bt.behaviours.recovery import RecoveryNode
 from suture_bt.behaviours.throw_progress import (
     SkipWhen,
     grasp_leaves_room,
+    grasp_reaches,
     holds_needle,
     pulled_through,
 )
@@ -119,3 +120,27 @@ def test_grasp_leaves_room_reads_the_planners_grasp_limit():
     assert check(ctx(good)) == "psm2's grasp leaves the tip room for pair 1"
     assert check(ctx(good - np.deg2rad(22.0))) == ""  # slid 4 mm toward the tip: re-grasp
     assert "not known to hold" in grasp_leaves_room(1, "psm1")(ctx(good))
+
+
+def test_grasp_reaches_says_when_the_held_needle_cannot_be_brought_to_the_approach():
+    from test_presentation import make_arm
+
+    from suture_bt.geometry import NeedleModel, PhantomModel
+    from suture_bt.planning import plan_needle_arc
+    from suture_bt.skills.grasps import hand, insertion_grasp_angle
+    from suture_bt.skills.pick_up import turned_over_hand
+
+    phantom, needle = PhantomModel(), NeedleModel()
+    angle = insertion_grasp_angle(plan_needle_arc(*phantom.pair(1), needle))
+    arm = make_arm("psm2")
+
+    def ctx(T_tip_needle):
+        held = NeedleBelief(np.eye(4), 0.0, "vision", "psm2", T_tip_needle)
+        return SimpleNamespace(phantom=phantom, needle=needle, belief=held, arm=lambda name: arm)
+
+    check = grasp_reaches(1, "psm2")
+    assert check(ctx(hand(needle, angle))) == "psm2's grasp reaches pair 1's approach"
+    # Picked up lying turned over (a needle that flipped when laid down): the wrist cannot
+    # turn the needle to the entry; the tree re-grasps through PSM1.
+    assert check(ctx(turned_over_hand(needle, angle))) == ""
+    assert "not known to hold" in grasp_reaches(1, "psm1")(ctx(hand(needle, angle)))

@@ -66,6 +66,7 @@ from suture_bt.behaviours.throw_progress import (
     calibrated,
     grasp_for_remaining,
     grasp_leaves_room,
+    grasp_reaches,
     holds_needle,
     prepared,
     pulled_through,
@@ -296,12 +297,21 @@ def checked_in_hand(pair: int, later_pairs: tuple[int, ...]) -> py_trees.behavio
     )
 
 
-def regrasp(pair: int, later_pairs: tuple[int, ...]) -> py_trees.behaviour.Behaviour:
-    """PSM2's grasp (after a slip) leaves the tip too little room: PSM1 takes the needle and
-    hands it back at the grasp the pairs from ``pair`` on need."""
+def regrasp(
+    pair: int, later_pairs: tuple[int, ...], why: str = "slipped"
+) -> py_trees.behaviour.Behaviour:
+    """PSM2's grasp (after a slip) leaves the tip too little room, or (``why`` "to re-take
+    it") cannot reach the pair's approach: PSM1 takes the needle and hands it back at the
+    grasp the pairs from ``pair`` on need."""
     grasp = grasp_for_pairs((pair, *later_pairs))
+    tag = "" if why == "slipped" else f" {why}"
+    give = (
+        f"PSM2 hands the slipped needle to PSM1 (pair {pair})"
+        if why == "slipped"
+        else f"PSM2 hands the needle to PSM1 {why} (pair {pair})"
+    )
     return py_trees.composites.Sequence(
-        f"Re-grasp for pair {pair}: PSM2 → PSM1 → PSM2",
+        f"Re-grasp for pair {pair}{tag}: PSM2 → PSM1 → PSM2",
         memory=True,
         children=[
             retried_handover(
@@ -310,7 +320,7 @@ def regrasp(pair: int, later_pairs: tuple[int, ...]) -> py_trees.behaviour.Behav
                     PULLER,
                     away_from_holder_and(grasp),
                     pulling=True,
-                    name=f"PSM2 hands the slipped needle to PSM1 (pair {pair})",
+                    name=give,
                 )
             ),
             retried_handover(
@@ -319,7 +329,7 @@ def regrasp(pair: int, later_pairs: tuple[int, ...]) -> py_trees.behaviour.Behav
                     INSERTER,
                     grasp,
                     next_pair=pair,
-                    name=f"PSM1 hands it back for pair {pair}",
+                    name=f"PSM1 hands it back for pair {pair}{tag}",
                 )
             ),
         ],
@@ -352,6 +362,11 @@ def throw(pair: int, later_pairs: tuple[int, ...]) -> py_trees.behaviour.Behavio
         memory=True,
         children=[
             NeedleLocalised(INSERTER, name="Needle in PSM2's hand?"),
+            SkipWhen(
+                f"Unless the grasp reaches pair {pair}",
+                regrasp(pair, later_pairs, "to re-take it"),
+                grasp_reaches(pair, INSERTER),
+            ),
             checked_in_hand(pair, later_pairs),
             SkipWhen(
                 f"Unless the grasp leaves the tip room (pair {pair})",
