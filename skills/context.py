@@ -143,6 +143,9 @@ class TaskContext:
     #: The arm whose jaw held the needle at the start (its measured jaw says so), before any
     #: estimate names a holder: a drop before the first estimate is still seen.
     start_holder: str | None = None
+    #: A world point near which a free needle lies (where it was laid down), for the arms to
+    #: make way before it is looked for; not a pose estimate.
+    needle_hint: np.ndarray | None = None
 
     @property
     def oracle(self) -> bool:

@@ -133,6 +133,7 @@ class LayDown(Skill):
         yield from jaw_to(arm, JAW_OPEN)
         ctx.belief = None
         ctx.start_holder = None
+        ctx.needle_hint = T_spot[:3, 3].copy()
         yield from move_to(ctx.clock, arm, [T_above], "rise clear of the needle", FINE)
         yield from wait(ctx.clock, SETTLE_S)
         self.say(f"{arm.name} let the needle go over the tissue")

@@ -31,8 +31,9 @@ from suture_bt.skills import checks
 from suture_bt.skills.base import Skill, SkillFailure, Waiting
 from suture_bt.skills.context import ArmHandle, NeedleObservation, TaskContext
 from suture_bt.skills.grasps import GRASP_DEPTH, backed_off, hand, held_arc_angle, tip_goal
+from suture_bt.skills.line_of_sight import make_way
 from suture_bt.skills.localize_needle import LocalizeNeedle
-from suture_bt.skills.motion import FINE, feasible, jaw_to, move_to
+from suture_bt.skills.motion import FINE, feasible, jaw_to, move_to, together
 from suture_bt.transforms import invert, make_transform
 
 #: The jaws come down along their length from this far back (m).
@@ -94,8 +95,12 @@ class PickUp(Skill):
             raise SkillFailure(f"pick up: the needle is held by {belief.holder}")
         asked = np.rad2deg(self.arc_angle)
         self.report["arc_angle_deg"] = float(asked)
+        if ctx.needle_hint is not None:  # laid down there: no arm in the cameras' way
+            self.say("the arms make way for the cameras")
+            yield from together(*make_way(ctx, np.asarray(ctx.needle_hint, dtype=float)))
         self.say("looking for the needle")
         yield from self.run(LocalizeNeedle(ctx, None))
+        ctx.needle_hint = None
         T_needle = ctx.belief.T_world_needle.copy()
 
         T_hand, which = self._choose_hand(T_needle)
