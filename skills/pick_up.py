@@ -99,7 +99,18 @@ class PickUp(Skill):
             self.say("the arms make way for the cameras")
             yield from together(*make_way(ctx, np.asarray(ctx.needle_hint, dtype=float)))
         self.say("looking for the needle")
-        yield from self.run(LocalizeNeedle(ctx, None))
+        try:
+            yield from self.run(LocalizeNeedle(ctx, None))
+        except SkillFailure as first:
+            # An arm may hide it from one eye: where the other eye saw needle, on the tissue
+            # top, is where the arms make way before one more look.
+            seen = seen_on_tissue(ctx)
+            if seen is None:
+                raise
+            self.report["first_look"] = first.reason
+            self.say("not seen clearly: the arms make way and it is looked at again")
+            yield from together(*make_way(ctx, seen))
+            yield from self.run(LocalizeNeedle(ctx, None))
         ctx.needle_hint = None
         T_needle = ctx.belief.T_world_needle.copy()
 
@@ -199,6 +210,26 @@ class PickUp(Skill):
         blade_end = goal[:3, :3] @ np.array([0.0, 0.0, BLADE_BEYOND_TIP]) + goal[:3, 3]
         height = (invert(T_ph) @ np.r_[blade_end, 1.0])[2] - TISSUE_TOP_Z
         return float(-1e3 * height)
+
+
+def seen_on_tissue(ctx: TaskContext) -> np.ndarray | None:
+    """The world point on the flat tissue top under the centre of the needle pixels the last
+    look saw (the eye that saw most), or None when no eye saw any (camera model and the
+    phantom's known frame)."""
+    cams = (ctx.camera.model.left, ctx.camera.model.right)
+    px, cam = max(zip(ctx.sensor.seen_pixels(), cams, strict=True), key=lambda pc: len(pc[0]))
+    if len(px) < 4:
+        return None
+    u, v = np.asarray(px, dtype=float).mean(axis=0)
+    ray = cam.T_world_cam[:3, :3] @ np.array([(u - cam.cx) / cam.fx, (v - cam.cy) / cam.fy, 1.0])
+    origin = cam.T_world_cam[:3, 3]
+    T_ph = ctx.phantom.T_world_phantom
+    up, top = T_ph[:3, 2], (T_ph @ np.array([0.0, 0.0, TISSUE_TOP_Z, 1.0]))[:3]
+    along = float(ray @ up)
+    if abs(along) < 1e-9:
+        return None
+    t = float((top - origin) @ up) / along
+    return origin + t * ray if t > 0 else None
 
 
 def _as_observation(belief, T_world_needle: np.ndarray) -> NeedleObservation:

@@ -150,12 +150,12 @@ def test_the_default_rest_pose_is_out_of_view_and_the_skill_says_so():
     # scene_from_dict({}): the SRC rest pose, at the image's bottom edge (see the docstring).
     with World.from_scene(resting_scene(position=None, offset="zero")) as world:
         ctx = build_context(world)
-        q0 = ctx.arm("psm2").servo.setpoint_jp()
         skill = PickUp(ctx, "psm2", pair1_grasp(ctx))
         assert run(world, ctx, skill) is SkillStatus.FAILURE
         assert skill.feedback.startswith("needle not localised: ")
         assert "\n" not in skill.feedback
-        assert np.allclose(ctx.arm("psm2").servo.setpoint_jp(), q0)
+        # Part of it was seen: the arms made way and it was looked at once more, no grasp.
+        assert skill.report["first_look"].startswith("needle not localised: ")
         assert ctx.belief is None
 
 
@@ -166,3 +166,23 @@ def test_a_needle_believed_held_is_not_picked_up():
         skill = PickUp(ctx, "psm2", pair1_grasp(ctx))
         assert run(world, ctx, skill) is SkillStatus.FAILURE
         assert skill.feedback == "pick up: the needle is held by psm1"
+
+
+def test_where_an_eye_saw_needle_is_found_on_the_tissue_top_for_the_arms_to_make_way():
+    from types import SimpleNamespace
+
+    from test_presentation import CAMERA, PHANTOMS, make_ctx
+
+    from suture_bt.skills.pick_up import seen_on_tissue
+
+    for name in ("default", "moved"):
+        ctx = make_ctx(PHANTOMS[name])
+        T_ph = ctx.phantom.T_world_phantom
+        centre = (T_ph @ np.array([-0.025, 0.01, TISSUE_TOP_Z, 1.0]))[:3]
+        ring = centre + 0.004 * np.array([[1.0, 0, 0], [-1, 0, 0], [0, 1, 0], [0, -1, 0]])
+        left = CAMERA.model.left.project(ring)  # the left eye saw it, the right one nothing
+        ctx.sensor = SimpleNamespace(seen_pixels=lambda px=left: (px, np.zeros((0, 2))))
+        found = seen_on_tissue(ctx)
+        assert np.linalg.norm(found - centre) < 0.0015  # the pixels' centre, back on the top
+    ctx.sensor = SimpleNamespace(seen_pixels=lambda: (np.zeros((0, 2)), np.zeros((0, 2))))
+    assert seen_on_tissue(ctx) is None  # nothing seen: nothing to make way for
