@@ -15,8 +15,12 @@ from suture_bt.behaviours.skill_behaviour import needs
 
 
 def failure_reason(node: py_trees.behaviour.Behaviour) -> str:
-    """The deepest failed descendant's feedback (where the reason was first said)."""
+    """The deepest failed descendant's feedback (where the reason was first said). A failed
+    blackboard check (an ``either_or`` option's "Enabled?") only says the option was not
+    chosen: it is passed over."""
     for child in node.iterate():
+        if isinstance(child, py_trees.behaviours.CheckBlackboardVariableValue):
+            continue
         if child is not node and child.status == Status.FAILURE and child.feedback_message:
             if not any(c.status == Status.FAILURE for c in getattr(child, "children", [])):
                 return f"{child.name}: {child.feedback_message}"

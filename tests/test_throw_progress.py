@@ -144,3 +144,28 @@ def test_grasp_reaches_says_when_the_held_needle_cannot_be_brought_to_the_approa
     # turn the needle to the entry; the tree re-grasps through PSM1.
     assert check(ctx(turned_over_hand(needle, angle))) == ""
     assert "not known to hold" in grasp_reaches(1, "psm1")(ctx(hand(needle, angle)))
+
+
+def test_the_reason_of_a_failed_either_or_is_the_chosen_options_not_the_other_guard():
+    import operator
+
+    from py_trees.common import ComparisonExpression
+
+    py_trees.blackboard.Blackboard.clear()
+    writer = py_trees.blackboard.Client(name="test")
+    writer.register_key("/start", access=py_trees.common.Access.WRITE)
+    writer.set("/start", "tissue")
+    picked = Said("Pick up", [F], "needle not localised: the network sees no needle")
+    choose = py_trees.idioms.either_or(
+        conditions=[
+            ComparisonExpression("/start", "jaw", operator.eq),
+            ComparisonExpression("/start", "tissue", operator.eq),
+        ],
+        subtrees=[Said("From the jaw", [S]), picked],
+        name="Where is the needle?",
+    )
+    tree = py_trees.trees.BehaviourTree(choose)
+    tree.tick()
+    assert choose.status == F
+    assert failure_reason(choose) == "Pick up: needle not localised: the network sees no needle"
+    py_trees.blackboard.Blackboard.clear()
