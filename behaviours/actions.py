@@ -146,8 +146,8 @@ class FindDroppedNeedle(SkillBehaviour):
 
 
 class LayDownNeedle(SkillBehaviour):
-    """Fallback when the needle in ``arm``'s jaw cannot be localised: lay it on the tissue
-    where ``arm`` can pick it up again at ``angle(context)``, and let go."""
+    """Empty ``arm``'s jaw for its calibration: lay the needle on the tissue where ``arm`` can
+    pick it up again at ``angle(context)``, and let go."""
 
     def __init__(self, arm: str, angle: AngleRule, name: str | None = None):
         super().__init__(name or f"{arm.upper()} lays the needle on the tissue")

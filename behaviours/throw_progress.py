@@ -92,9 +92,10 @@ def prepared(holder: str, arms: tuple[str, ...]) -> DoneCheck:
     held = holds_needle(holder)
 
     def check(ctx: TaskContext) -> str:
-        if not all(ctx.arm(a).calibrated for a in arms) or not held(ctx):
+        says = held(ctx)
+        if not says or not all(ctx.arm(a).calibrated for a in arms):
             return ""
-        return f"{', '.join(arms)} calibrated and {held(ctx)}"
+        return f"{', '.join(arms)} calibrated and {says}"
 
     return check
 
@@ -108,6 +109,18 @@ def calibrated(arm: str) -> DoneCheck:
     return check
 
 
+def _held_and_planned(ctx: TaskContext, pair: int, arm: str):
+    """(the belief, the planned circle through ``pair``) when ``arm`` is known to hold the
+    needle and the pair has a circle; else (why the grasp is left to the insertion, None)."""
+    b = ctx.belief
+    if b is None or b.holder != arm or b.T_tip_needle is None:
+        return f"{arm} is not known to hold the needle (the insertion says so)", None
+    try:
+        return b, plan_needle_arc(*ctx.phantom.pair(pair), ctx.needle)
+    except NeedleArcError as e:
+        return f"no circle through pair {pair} ({e.reason}; the insertion says so)", None
+
+
 def grasp_reaches(pair: int, arm: str) -> DoneCheck:
     """'' when ``arm`` cannot bring the needle, as its believed grasp holds it, to the
     approach poses of ``pair`` (a grasp taken off the tissue can leave the wrist no way to
@@ -115,13 +128,9 @@ def grasp_reaches(pair: int, arm: str) -> DoneCheck:
     anything else is left to the in-hand check and the insertion to judge."""
 
     def check(ctx: TaskContext) -> str:
-        b = ctx.belief
-        if b is None or b.holder != arm or b.T_tip_needle is None:
-            return f"{arm} is not known to hold the needle (the insertion says so)"
-        try:
-            arc = plan_needle_arc(*ctx.phantom.pair(pair), ctx.needle)
-        except NeedleArcError as e:
-            return f"no circle through pair {pair} ({e.reason}; the insertion says so)"
+        b, arc = _held_and_planned(ctx, pair, arm)
+        if arc is None:
+            return b
         T_inv = invert(b.T_tip_needle)
         poses = [T @ T_inv for T in arc.approach_poses(PRE_ARC, LIFT)]
         if feasible(ctx.arm(arm), poses):
@@ -136,13 +145,9 @@ def grasp_leaves_room(pair: int, arm: str) -> DoneCheck:
     to the tip: a re-grasp is needed); anything else is left to the insertion to judge."""
 
     def check(ctx: TaskContext) -> str:
-        b = ctx.belief
-        if b is None or b.holder != arm or b.T_tip_needle is None:
-            return f"{arm} is not known to hold the needle (the insertion says so)"
-        try:
-            arc = plan_needle_arc(*ctx.phantom.pair(pair), ctx.needle)
-        except NeedleArcError as e:
-            return f"no circle through pair {pair} ({e.reason}; the insertion says so)"
+        b, arc = _held_and_planned(ctx, pair, arm)
+        if arc is None:
+            return b
         try:
             arc.check_grasp(b.T_tip_needle, JAW_CLEARANCE)
         except NeedleArcError:

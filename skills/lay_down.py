@@ -1,9 +1,10 @@
 """Skill: lay a held needle down on the tissue, where it can be seen and picked up again.
 
-The fallback when a needle in an (uncalibrated) arm's jaw cannot be localised where it is held:
-the arm lays it flat on the tissue and lets go, so the tree can calibrate the arm with its
-jaw empty and pick the needle up from the tissue (:mod:`pick_up`), which works whatever the
-offsets (localising a resting needle needs no presentation). The spot is chosen from the
+How the preparation empties the jaw that holds the needle at the SRC Task 3 start: the
+(uncalibrated) arm lays it flat on the tissue and lets go, so the tree can calibrate the arm
+with its jaw empty and pick the needle up from the tissue (:mod:`pick_up`), which works
+whatever the offsets (localising a resting needle needs no presentation; one held in an
+uncalibrated jaw does). The spot is chosen from the
 phantom's known frame and the camera model: on the flat tissue top beside the ridge, where a
 needle lying around it is in both cameras' view and the arm can both reach the release pose
 and come down on the needle from above. The jaws point straight down, so a needle held across
@@ -27,7 +28,7 @@ from suture_bt.skills.grasps import GRASP_DEPTH, hand
 from suture_bt.skills.motion import FINE, feasible, jaw_to, move_to, wait
 from suture_bt.skills.pick_up import grasp_path
 from suture_bt.skills.recover import JAW_OPEN
-from suture_bt.transforms import make_transform
+from suture_bt.transforms import make_transform, rpy_to_matrix
 
 #: Spots tried (phantom frame, m: x across the ridge, y along it), beside the ridge on either
 #: side (the SRC's own resting needle lies at x = -21 mm, y = 56 mm).
@@ -65,8 +66,8 @@ def _spot_frames(ctx: TaskContext) -> list[np.ndarray]:
 
 
 def _turned(T: np.ndarray, yaw: float) -> np.ndarray:
-    c, s = np.cos(yaw), np.sin(yaw)
-    return T @ make_transform(np.array([[c, -s, 0.0], [s, c, 0.0], [0.0, 0.0, 1.0]]), np.zeros(3))
+    """``T`` turned by ``yaw`` (rad) about its own z axis."""
+    return T @ make_transform(rpy_to_matrix((0.0, 0.0, yaw)))
 
 
 def release_pose(ctx: TaskContext, arm: ArmHandle, T_spot: np.ndarray) -> np.ndarray | None:
@@ -196,10 +197,4 @@ def landing_ok(ctx: TaskContext, points: np.ndarray) -> np.ndarray:
         & (local[:, 1] <= TISSUE_Y[1] - EDGE_MARGIN)
     )
     flat = surface_height(ctx.phantom, points) <= TISSUE_TOP_Z + 1e-4
-    seen = np.ones(len(points), bool)
-    for cam in (ctx.camera.model.left, ctx.camera.model.right):
-        uv = cam.project(points)
-        m = presentation.VIEW_MARGIN_PX
-        seen &= (uv[:, 0] >= m) & (uv[:, 1] >= m)
-        seen &= (uv[:, 0] <= cam.width - m) & (uv[:, 1] <= cam.height - m)
-    return on_block & flat & seen
+    return on_block & flat & presentation.seen_by_both(ctx, points)

@@ -35,6 +35,7 @@ from suture_bt.skills.context import ArmHandle, TaskContext
 from suture_bt.skills.grasps import GRASP_DEPTH
 from suture_bt.skills.line_of_sight import hidden_by_own_tool
 from suture_bt.skills.motion import feasible
+from suture_bt.skills.offset_evidence import held_circles
 from suture_bt.skills.tip_uncertainty import offset_displacements, tip_displacements, tip_margin
 from suture_bt.transforms import make_transform
 
@@ -142,9 +143,8 @@ def needle_place_sets(ctx: TaskContext, arm: ArmHandle, T_tip: np.ndarray) -> li
         )
         return [arc @ T_needle[:3, :3].T + T_needle[:3, 3]]
     pinch = T_tip[:3, 3] - GRASP_DEPTH * T_tip[:3, 2]
-    a = np.linspace(0.0, 2 * np.pi, CIRCLE_SAMPLES, endpoint=False)
-    ring = r * (np.cos(a)[:, None] * T_tip[:3, 0] + np.sin(a)[:, None] * T_tip[:3, 1])
-    return [np.vstack([pinch[None], pinch + s * r * T_tip[:3, 1] + ring]) for s in (1.0, -1.0)]
+    sides = np.split(held_circles(T_tip, r, CIRCLE_SAMPLES), 2)
+    return [np.vstack([pinch[None], side]) for side in sides]
 
 
 def needle_places(ctx: TaskContext, arm: ArmHandle, T_tip: np.ndarray) -> np.ndarray:
@@ -189,16 +189,24 @@ def needle_clearance(ctx: TaskContext, arm: ArmHandle, T_tip: np.ndarray) -> flo
     return clearance_at(ctx, arm, T_tip, displacements(arm, q))
 
 
+def seen_by_both(
+    ctx: TaskContext, points_world: np.ndarray, margin_px: float = VIEW_MARGIN_PX
+) -> np.ndarray:
+    """Per point: in front of both cameras and inside both images with ``margin_px`` to spare."""
+    pts = np.atleast_2d(points_world)
+    seen = np.ones(len(pts), bool)
+    for cam in (ctx.camera.model.left, ctx.camera.model.right):
+        seen &= cam.to_camera(pts)[:, 2] > 0
+        uv = cam.project(pts)
+        m = margin_px
+        seen &= (uv[:, 0] >= m) & (uv[:, 1] >= m)
+        seen &= (uv[:, 0] <= cam.width - m) & (uv[:, 1] <= cam.height - m)
+    return seen
+
+
 def in_view(ctx: TaskContext, points_world: np.ndarray, margin_px: float = VIEW_MARGIN_PX) -> bool:
     """Whether every point projects inside both images with ``margin_px`` to spare."""
-    for cam in (ctx.camera.model.left, ctx.camera.model.right):
-        if np.any(cam.to_camera(points_world)[:, 2] <= 0):
-            return False
-        uv = cam.project(points_world)
-        m = margin_px
-        if np.any(uv < m) or np.any(uv[:, 0] > cam.width - m) or np.any(uv[:, 1] > cam.height - m):
-            return False
-    return True
+    return bool(np.all(seen_by_both(ctx, points_world, margin_px)))
 
 
 def safe_to_present(ctx: TaskContext, arm: ArmHandle, T_tip: np.ndarray) -> bool:
