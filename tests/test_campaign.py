@@ -56,13 +56,38 @@ def test_draws_are_seeded_in_bounds_and_valid_scenes():
 def test_the_resting_fraction_changes_only_the_needle_start():
     base = CampaignConfig()
     resting = CampaignConfig(randomization=Randomization(resting_fraction=1.0))
+    src = CampaignConfig(randomization=Randomization(resting_fraction=1.0, resting_place="src"))
     for i in range(5):
         a, b = draw(base, i), draw(resting, i)
-        assert b["needle"] == {"start": "resting"}
+        assert b["needle"]["start"] == "pose" and draw(src, i)["needle"] == {"start": "resting"}
         assert a["arms"] == b["arms"] and a["phantom"] == b["phantom"]
         scene_from_dict(trial_scene_dict(resting, i))
     with pytest.raises(ValueError, match="tilt"):
-        Randomization(tilt_deg=5.0)
+        Randomization(tilt_deg=20.0)
+    with pytest.raises(ValueError, match="resting place"):
+        Randomization(resting_place="anywhere")
+
+
+def test_resting_starts_lie_flat_on_the_tissue_in_both_views_and_move_with_the_phantom():
+    from suture_bt.campaign.resting_start import MARGIN_PX, _in_view
+    from suture_bt.geometry import NeedleModel
+    from suture_bt.sim.camera import stereo_model
+    from suture_bt.transforms import invert, pose_to_transform
+
+    wide = Randomization(resting_fraction=1.0, phantom_xy_mm=20, phantom_yaw_deg=20, tilt_deg=5)
+    config = CampaignConfig(seed=40, randomization=wide)
+    camera, arc = stereo_model(1920, 1080), NeedleModel().centerline(25)
+    faces = set()
+    for i in range(20):
+        d = draw(config, i)
+        T_wp = pose_to_transform(d["phantom"]["position"], d["phantom"]["rpy"])
+        T = pose_to_transform(d["needle"]["position"], d["needle"]["rpy"])
+        local = invert(T_wp) @ T
+        assert abs(local[2, 2]) > 0.999  # the needle's plane is the tissue's
+        assert 0.022 <= abs(local[0, 3]) <= 0.036  # beside the ridge, on the block
+        faces.add(bool(local[2, 2] < 0))
+        assert _in_view(camera, arc @ T[:3, :3].T + T[:3, 3], MARGIN_PX)
+    assert faces == {True, False}  # face up and face down both drawn
 
 
 def test_a_base_scene_file_is_kept_where_nothing_is_drawn():
@@ -205,7 +230,10 @@ def test_the_eval_command_parses_every_option_and_reports_without_running(tmp_pa
     argv = ["eval", "--trials", "3", "--workers", "1", "--seed", "4", "--policy", "continue"]
     argv += ["--time-budget", "30", "--resting-fraction", "0.5", "--servo", "nominal"]
     argv += ["--rerun", "save", "--tree", "single_throw", "--out", str(tmp_path)]
+    argv += ["--phantom-xy", "20", "--phantom-yaw", "15", "--phantom-tilt", "4"]
     config = eval_command._config(build_parser().parse_args(argv))
+    rz = config.randomization
+    assert (rz.phantom_xy_mm, rz.phantom_z_mm, rz.phantom_yaw_deg, rz.tilt_deg) == (20, 1.5, 15, 4)
     assert (config.seed, config.tree, config.policy, config.rerun) == (
         4,
         "single_throw",
@@ -215,6 +243,8 @@ def test_the_eval_command_parses_every_option_and_reports_without_running(tmp_pa
     assert config.randomization.resting_fraction == 0.5 and config.randomization.servo == "nominal"
     assert main(["eval", "--trials", "1", "--tree", "nope", "--out", str(tmp_path)]) == 1
     assert "unknown tree 'nope'" in capsys.readouterr().err
+    assert main(["eval", "--trials", "1", "--phantom-tilt", "30", "--out", str(tmp_path)]) == 1
+    assert capsys.readouterr().err.strip().endswith("phantom tilt must be in [0, 15] deg, got 30.0")
     run_campaign(CampaignConfig(), 3, tmp_path, trial_fn=_fake({1: "fail"}))
     assert main(["eval", "--trials", "3", "--report-only", "--out", str(tmp_path)]) == 0
     out = capsys.readouterr().out

@@ -7,10 +7,13 @@ gives the same scene on any machine or backend:
 
 * both arms' hidden joint offsets, uniform over the full SRC bounds (±5°, ±5°, ±5 mm);
 * the needle start: in PSM2's jaw at a drawn grasp arc angle, or (with ``resting_fraction``
-  > 0) resting at the SRC start pose; the default is jaw-only, because resting starts are not
-  yet reliable in the tree;
-* the phantom pose, jittered within the arms' reach: a few mm, a few degrees about the
-  vertical, at most ``tilt_deg`` of tilt (larger moves are known to fail);
+  > 0) resting on the tissue: at a place drawn on the flat tissue beside the ridge, either face
+  up, turned at random and inside both cameras' views (``resting_place = "view"``, the
+  default), or at the SRC start pose (``"src"``, which lies below the image's bottom edge in
+  this camera: no tree can find it from images);
+* the phantom pose, jittered about the base scene's: ± ``phantom_xy_mm`` / ``phantom_z_mm``,
+  ± ``phantom_yaw_deg`` about the vertical and ± ``tilt_deg`` of roll and pitch (defaults: a few
+  mm and degrees; wider ranges stand in for held-out scenes);
 * the camera's noise and brightness (inside the perception training ranges);
 * the low-level servo's bandwidth, damping, friction and load, per arm and joint, drawn by the
   world from the scene seed over the ranges of ``fault_profiles.yaml`` (``servo = "drawn"``,
@@ -31,9 +34,12 @@ import numpy as np
 OFFSET_BOUND = (5.0, 5.0, 5.0)
 ARMS = ("psm1", "psm2")
 #: Independent random streams, one per aspect of a trial.
-STREAMS = {"offsets": 1, "needle": 2, "phantom": 3, "camera": 4}
+STREAMS = {"offsets": 1, "needle": 2, "phantom": 3, "camera": 4, "resting": 5}
 #: The profile whose servo ranges a ``servo = "drawn"`` campaign uses under fault profile none.
 SERVO_PROFILE = "mild"
+#: Widest phantom jitter a campaign accepts (mm, deg): beyond it the ports leave the arms'
+#: reach or the cameras' view, and trials would measure the scene, not the tree.
+MAX_MOVE_MM, MAX_YAW_DEG, MAX_TILT_DEG = 50.0, 45.0, 15.0
 
 
 def servo_ranges(profile: str = SERVO_PROFILE) -> dict[str, list[float]]:
@@ -53,6 +59,7 @@ class Randomization:
 
     grasp_arc_deg: tuple[float, float] = (145.0, 165.0)
     resting_fraction: float = 0.0
+    resting_place: str = "view"  # "view": drawn on the tissue in view | "src": SRC start pose
     phantom_xy_mm: float = 3.0
     phantom_z_mm: float = 1.5
     phantom_yaw_deg: float = 3.0
@@ -68,8 +75,19 @@ class Randomization:
             raise ValueError(f"grasp arc range must lie in [57, 180] deg, got {lo}..{hi}")
         if not 0.0 <= self.resting_fraction <= 1.0:
             raise ValueError(f"resting fraction must be in [0, 1], got {self.resting_fraction}")
-        if not 0.0 <= self.tilt_deg <= 2.0:
-            raise ValueError(f"phantom tilt must be at most 2 deg, got {self.tilt_deg}")
+        if not 0.0 <= self.tilt_deg <= MAX_TILT_DEG:
+            raise ValueError(
+                f"phantom tilt must be in [0, {MAX_TILT_DEG:g}] deg, got {self.tilt_deg}"
+            )
+        for name, value, bound in (
+            ("phantom x/y move", self.phantom_xy_mm, MAX_MOVE_MM),
+            ("phantom z move", self.phantom_z_mm, MAX_MOVE_MM),
+            ("phantom yaw", self.phantom_yaw_deg, MAX_YAW_DEG),
+        ):
+            if not 0.0 <= value <= bound:
+                raise ValueError(f"{name} must be in [0, {bound:g}], got {value}")
+        if self.resting_place not in ("view", "src"):
+            raise ValueError(f"resting place must be view or src, got {self.resting_place!r}")
         if self.servo not in ("nominal", "drawn"):
             raise ValueError(f"servo must be nominal or drawn, got {self.servo!r}")
 
@@ -130,12 +148,11 @@ def draw(config: CampaignConfig, index: int) -> dict[str, Any]:
     resting = bool(g.random() < rz.resting_fraction)
     grasp = _r(g.uniform(*rz.grasp_arc_deg), 2)
     out["needle"] = (
-        {"start": "resting"}
-        if resting
-        else {
-            "start": "in_psm2_jaw",
-            "grasp_arc_angle_deg": grasp,
-        }
+        {"start": "in_psm2_jaw", "grasp_arc_angle_deg": grasp}
+        if not resting
+        else {"start": "resting"}
+        if rz.resting_place == "src"
+        else None  # drawn below, once the phantom pose is known
     )
     g = _rng(seed, "phantom")
     xy = g.uniform(-1.0, 1.0, 2) * rz.phantom_xy_mm * 1e-3
@@ -149,6 +166,8 @@ def draw(config: CampaignConfig, index: int) -> dict[str, Any]:
         "position": [_r(p0[0] + xy[0], 6), _r(p0[1] + xy[1], 6), _r(p0[2] + z, 6)],
         "rpy": [_r(r0[0] + roll, 6), _r(r0[1] + pitch, 6), _r(r0[2] + yaw, 6)],
     }
+    if out["needle"] is None:
+        out["needle"] = _resting_in_view(config, seed, out["phantom"])
     g = _rng(seed, "camera")
     out["camera"] = {
         "noise_std": _r(g.uniform(*rz.noise_std), 3),
@@ -158,6 +177,17 @@ def draw(config: CampaignConfig, index: int) -> dict[str, Any]:
     if faults is not None:
         out["faults"] = faults
     return out
+
+
+def _resting_in_view(config: CampaignConfig, seed: int, phantom: dict[str, Any]) -> dict[str, Any]:
+    """A resting start drawn on the tissue in both views of the trial's camera."""
+    from suture_bt.campaign.resting_start import resting_in_view
+    from suture_bt.transforms import pose_to_transform
+
+    camera = config.scene_raw.get("camera") or {}
+    size = int(camera.get("width", 1920)), int(camera.get("height", 1080))
+    T_world_phantom = pose_to_transform(phantom["position"], phantom["rpy"])
+    return resting_in_view(_rng(seed, "resting"), T_world_phantom, *size)
 
 
 def _faults(profile: str, servo: str) -> str | dict[str, Any] | None:

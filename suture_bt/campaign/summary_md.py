@@ -35,10 +35,13 @@ def _randomization(config: dict[str, Any]) -> list[str]:
     rz = config["randomization"]
     lo, hi = rz["grasp_arc_deg"]
     rest = rz["resting_fraction"]
+    place = (
+        "at the SRC start pose (below the image)"
+        if rz.get("resting_place") == "src"
+        else "at a place drawn on the tissue in both views, either face up"
+    )
     start = f"in PSM2's jaw at a grasp arc angle drawn in [{lo:g}, {hi:g}]°" + (
-        f"; {100 * rest:.0f} % of trials resting on the tissue"
-        if rest
-        else " (jaw-only: resting starts are not yet reliable in the tree)"
+        f"; {100 * rest:.0f} % of trials resting on the tissue {place}" if rest else " (jaw-only)"
     )
     faults = config["faults"]
     if rz["servo"] == "nominal":

@@ -13,6 +13,7 @@ import signal
 import sys
 from pathlib import Path
 
+from suture_bt.campaign.randomize import Randomization
 from suture_bt.trees import TREE_NAMES
 
 
@@ -60,6 +61,27 @@ def register(subparsers) -> None:
         "all in PSM2's jaw)",
     )
     p.add_argument(
+        "--resting-place",
+        choices=("view", "src"),
+        default="view",
+        help="where a resting needle starts: drawn on the tissue in both views (default), or "
+        "the SRC start pose (below this camera's image)",
+    )
+    jitter = Randomization()
+    for flag, field, unit, what in (
+        ("--phantom-xy", "phantom_xy_mm", "MM", "x/y move"),
+        ("--phantom-z", "phantom_z_mm", "MM", "z move"),
+        ("--phantom-yaw", "phantom_yaw_deg", "DEG", "turn about the vertical"),
+        ("--phantom-tilt", "tilt_deg", "DEG", "roll and pitch"),
+    ):
+        p.add_argument(
+            flag,
+            type=float,
+            default=getattr(jitter, field),
+            metavar=unit,
+            help=f"phantom {what} drawn within ± this (default {getattr(jitter, field):g})",
+        )
+    p.add_argument(
         "--servo",
         choices=("drawn", "nominal"),
         default="drawn",
@@ -89,7 +111,7 @@ def _config(args):
     """The campaign configuration from the arguments (one-line errors for bad ones)."""
     import yaml
 
-    from suture_bt.campaign.randomize import CampaignConfig, Randomization, faults_supported
+    from suture_bt.campaign.randomize import CampaignConfig, faults_supported
     from suture_bt.sim.scene import load_scene
 
     if args.tree not in TREE_NAMES:
@@ -115,7 +137,15 @@ def _config(args):
         oracle=args.oracle,
         policy=args.policy,
         rerun=args.rerun,
-        randomization=Randomization(resting_fraction=args.resting_fraction, servo=args.servo),
+        randomization=Randomization(
+            resting_fraction=args.resting_fraction,
+            resting_place=args.resting_place,
+            phantom_xy_mm=args.phantom_xy,
+            phantom_z_mm=args.phantom_z,
+            phantom_yaw_deg=args.phantom_yaw,
+            tilt_deg=args.phantom_tilt,
+            servo=args.servo,
+        ),
     )
 
 

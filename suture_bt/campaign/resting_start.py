@@ -1,0 +1,78 @@
+"""A campaign trial's resting needle start: a place on the flat tissue that both cameras see.
+
+The SRC start pose lies below the bottom edge of this camera's image, so a campaign that wants
+to measure resting starts draws its own: the needle's centre beside the ridge (clear of its
+flanks), turned about the vertical at random, face up or face down, a millimetre above the
+tissue (physics lets it settle), and every point of its arc at least ``MARGIN_PX`` inside both
+images. Drawn in the phantom frame, so it moves with the phantom. This is evaluation code: it
+uses the simulator's camera model to pick scenes, never to help a tree.
+"""
+
+from __future__ import annotations
+
+from typing import Any
+
+import numpy as np
+
+from suture_bt.geometry import NeedleModel
+from suture_bt.geometry.phantom import TISSUE_TOP_Z
+from suture_bt.transforms import matrix_to_rpy, pose_to_transform
+
+#: Needle centre's distance from the ridge line x = 0 (phantom frame, m): clear of the flanks
+#: (the ridge's foot is ~8 mm out, the needle's radius 10 mm) and on the block.
+CENTRE_X = (0.022, 0.036)
+#: Needle centre's range along the ridge (phantom frame, m).
+CENTRE_Y = (-0.045, 0.045)
+#: Height of the needle frame above the tissue top when it is let go (wire radius + 1 mm).
+DROP_Z = 0.00136
+#: Every arc point at least this far inside both images (px).
+MARGIN_PX = 40.0
+TRIES = 200
+
+
+def _in_view(camera: Any, points_world: np.ndarray, margin: float) -> bool:
+    """Whether all points project at least ``margin`` px inside both eyes' images."""
+    for cam in (camera.left, camera.right):
+        T = np.linalg.inv(cam.T_world_cam)
+        p = points_world @ T[:3, :3].T + T[:3, 3]
+        if np.any(p[:, 2] <= 0):
+            return False
+        u = cam.fx * p[:, 0] / p[:, 2] + cam.cx
+        v = cam.fy * p[:, 1] / p[:, 2] + cam.cy
+        if u.min() < margin or v.min() < margin:
+            return False
+        if u.max() > cam.width - margin or v.max() > cam.height - margin:
+            return False
+    return True
+
+
+def resting_in_view(
+    rng: np.random.Generator, T_world_phantom: np.ndarray, width: int, height: int
+) -> dict[str, Any]:
+    """A ``needle:`` scene section (``start: pose``) resting on the tissue in both views.
+
+    Raises ``ValueError`` when no place in ``TRIES`` draws is in view (a phantom moved so far
+    that its flat tissue has left the images)."""
+    from suture_bt.sim.camera import stereo_model
+
+    camera = stereo_model(width, height)
+    model = NeedleModel()
+    arc = model.centerline(25)
+    for _ in range(TRIES):
+        side = 1.0 if rng.random() < 0.5 else -1.0
+        x = side * rng.uniform(*CENTRE_X)
+        y = rng.uniform(*CENTRE_Y)
+        yaw = rng.uniform(-np.pi, np.pi)
+        flipped = bool(rng.random() < 0.5)
+        T_local = pose_to_transform(
+            (x, y, TISSUE_TOP_Z + DROP_Z), (np.pi if flipped else 0.0, 0.0, yaw)
+        )
+        T = T_world_phantom @ T_local
+        points = arc @ T[:3, :3].T + T[:3, 3]
+        if _in_view(camera, points, MARGIN_PX):
+            return {
+                "start": "pose",
+                "position": [round(float(v), 6) for v in T[:3, 3]],
+                "rpy": [round(float(v), 6) for v in matrix_to_rpy(T[:3, :3])],
+            }
+    raise ValueError(f"no resting place on the tissue in both views after {TRIES} draws")
