@@ -6,10 +6,11 @@ transform is gone), the arm that dropped it opens its jaw and rises, both arms l
 cameras' sight lines to where the needle most likely fell (straight below), the needle is given
 a moment to come to rest, and it is localised from images where it lies. Then, from that
 estimate alone, it says whether a pick-up can work: a needle caught in the tissue (hanging in
-a port), one standing on its edge (no jaw direction from above), one lying turned over (only
-the turned hand takes it from above, and no handover gives the driving hand back: both arms
-take it from the side it is held from) or one out of the picking arm's reach fails the skill
-with a reason that starts "needle dropped by <arm> and ...", so the throw ends saying why.
+a port), one standing on its edge (no jaw direction from above) or one out of the picking
+arm's reach fails the skill with a reason that starts "needle dropped by <arm> and ...", so the
+throw ends saying why. A needle lying turned over is taken with the turned hand, as the pick-up
+takes it (:func:`~suture_bt.skills.pick_up.turned_over_hand`); the throw that resumes sees that
+this grasp cannot reach its pair and re-takes it through PSM1 (``grasp_reaches``).
 Output: the free belief (holder None) the pick-up starts from.
 """
 
@@ -25,7 +26,7 @@ from suture_bt.skills.grasps import hand
 from suture_bt.skills.line_of_sight import clear_tip_pose
 from suture_bt.skills.localize_needle import LocalizeNeedle
 from suture_bt.skills.motion import feasible, jaw_to, move_to, together, wait
-from suture_bt.skills.pick_up import MAX_TILT, grasp_path, resting_tilt
+from suture_bt.skills.pick_up import MAX_TILT, grasp_path, resting_tilt, turned_over_hand
 from suture_bt.skills.recover import JAW_OPEN
 from suture_bt.transforms import invert
 
@@ -33,7 +34,8 @@ from suture_bt.transforms import invert
 #: that dropped it rises this far from the tissue first (m).
 SETTLE_S, RISE = 0.3, 0.010
 #: A seen needle with a point this far under the tissue top or a port's surface, within
-#: ``PORT_RADIUS`` of that port, is caught in the tissue (m).
+#: ``PORT_RADIUS`` of that port (a ball, not a cylinder along the port's axis: the axis runs
+#: through the ridge and out over the flat tissue beyond it), is caught in the tissue (m).
 UNDER_SURFACE, PORT_RADIUS = 0.001, 0.006
 
 
@@ -54,7 +56,7 @@ def caught_in_tissue(context: TaskContext, T_world_needle: np.ndarray) -> str:
     pts = context.needle.centerline(60) @ T_world_needle[:3, :3].T + T_world_needle[:3, 3]
     for port in context.phantom.ports():
         local = (pts - port.position) @ port.T[:3, :3]  # port frame: z along the normal
-        near = np.hypot(local[:, 0], local[:, 1]) <= PORT_RADIUS
+        near = np.linalg.norm(local, axis=1) <= PORT_RADIUS
         if np.any(near & (local[:, 2] < -UNDER_SURFACE)):
             depth = float(-np.min(local[near, 2]))
             return f"hanging in {port.name} ({1e3 * depth:.1f} mm under its surface)"
@@ -68,22 +70,17 @@ def caught_in_tissue(context: TaskContext, T_world_needle: np.ndarray) -> str:
 
 
 def pick_up_path(context: TaskContext, T_world_needle: np.ndarray, arc_angle: float):
-    """The pick-up's tip poses (hover, grasp, lift) for this resting needle with the driving
-    hand, as :class:`~suture_bt.skills.pick_up.PickUp` plans them; SkillFailure (its reason)
-    for a needle on its edge or lying turned over."""
+    """The pick-up's tip poses (hover, grasp, lift) for this resting needle with the hand
+    :class:`~suture_bt.skills.pick_up.PickUp` takes it with (the driving hand, or the turned
+    one for a needle lying turned over); SkillFailure (its reason) for a needle on its edge."""
     tilt, z_up = resting_tilt(context, T_world_needle)
     if tilt > MAX_TILT:
         raise SkillFailure(
             f"standing on its edge (plane {np.rad2deg(tilt):.0f}° from the tissue, > "
             f"{np.rad2deg(MAX_TILT):.0f}°): no grasp from above"
         )
-    if not z_up:
-        raise SkillFailure(
-            "lying turned over: from above only the turned hand takes it, the insertion "
-            "cannot be driven with that hand and no handover changes the side the jaws hold "
-            "it from (both arms take it from the same side)"
-        )
-    return grasp_path(context, T_world_needle, hand(context.needle, arc_angle))
+    which = hand if z_up else turned_over_hand
+    return grasp_path(context, T_world_needle, which(context.needle, arc_angle))
 
 
 class FindDropped(Skill):

@@ -119,8 +119,7 @@ def ran(session, name: str) -> list[tuple[int, str, Status]]:
 @pytest.mark.slow
 def test_needle_dropped_before_the_insertion_is_picked_up_and_the_throw_resumed(session):
     # PSM2 brings the needle over entry 1 (the in-hand check before the insertion); the jaw
-    # loses it 0.3 s into the move. (Where it lands is physics: dropped at the move's start,
-    # it lies turned over on the ridge, which is refused: see the turned-over test below.)
+    # loses it 0.3 s into the move; it lands where physics puts it.
     assert session.run_until(running(session, CHECK_1, "bringing the needle")) is not None
     session.step(15)
     session.world.faults.drop("psm2")
@@ -236,19 +235,16 @@ ON_TISSUE = (-0.0172, 0.0052, 0.0717)
 
 
 @pytest.mark.slow
-def test_needle_dropped_in_the_hand_back_is_picked_up_for_the_later_pairs_not_inserted_again():
+def test_needle_dropped_in_the_hand_back_lands_turned_over_is_picked_up_and_re_taken():
     from suture_bt.behaviours.actions import grasp_for_pairs
 
     session = Session(RunOptions(tree="multi_throw"))
     try:
         hand_back = node(session, "Hand back after pair 1")
         assert session.run_until(lambda s: hand_back.status == Status.RUNNING) is not None
-        session.world.faults.drop("psm1")
-        # Test API: it came to rest flat, z up (a needle dropped from PSM1's presentation
-        # lands turned over, which no pick-up can use; see the turned-over test below).
-        session.world.needle.set_pose(_pose(_rot_z(-1.509), ON_TISSUE))
-        throw_2 = node(session, "Throw 2")
-        assert session.run_until(lambda s: throw_2.status == Status.RUNNING) is not None
+        session.world.faults.drop("psm1")  # physics lands it turned over beyond the ridge
+        re_take = node(session, "Re-grasp for pair 2 to re-take it: PSM2 → PSM1 → PSM2")
+        assert session.run_until(lambda s: re_take.status == Status.SUCCESS) is not None
         assert session.context.throws[1]["status"] == "SUCCESS"
         assert ran(session, "Retry: pair 1 after a drop") == [
             (1, "Pair 1 (time limit)", Status.FAILURE),
@@ -266,6 +262,7 @@ def test_needle_dropped_in_the_hand_back_is_picked_up_for_the_later_pairs_not_in
         pick = next(r for r in reports if r["behaviour"] == "PSM2 picks the dropped needle up")
         later = np.rad2deg(grasp_for_pairs((2, 3, 4))(session.context))
         assert pick["status"] == "SUCCESS" and pick["arc_angle_deg"] == pytest.approx(later)
+        assert pick["hand"] == "turned over"  # the only hand from above; throw 2 re-takes it
         assert passed(session), session.scores()[0].failure
     finally:
         session.close()
@@ -333,7 +330,7 @@ def test_a_drifted_psm2_is_seen_off_its_pinch_point_and_recalibrated(session):
     assert passed(session), session.scores()[0].failure
 
 
-def test_a_needle_lying_turned_over_or_on_its_edge_is_refused_before_any_pick_up():
+def test_a_needle_on_its_edge_is_refused_and_one_turned_over_is_taken_from_above():
     from suture_bt.geometry import NeedleModel, PhantomModel
     from suture_bt.skills.base import SkillFailure
     from suture_bt.skills.dropped import pick_up_path
@@ -341,10 +338,27 @@ def test_a_needle_lying_turned_over_or_on_its_edge_is_refused_before_any_pick_up
     ctx = SimpleNamespace(phantom=PhantomModel(), needle=NeedleModel())
     flat = _pose(np.eye(4), ON_TISSUE)
     assert len(pick_up_path(ctx, flat, 2.8)) == 3
-    with pytest.raises(SkillFailure, match="lying turned over"):
-        pick_up_path(ctx, flat @ _rot_x(np.pi), 2.8)
+    hover, grasp, lift = pick_up_path(ctx, flat @ _rot_x(np.pi), 2.8)  # turned over
+    down = -PhantomModel().T_world_phantom[:3, 2]
+    assert grasp[:3, 2] @ down > np.cos(np.deg2rad(1.0))  # jaws straight down, as for flat
+    assert np.linalg.norm(grasp[:3, 3] - hover[:3, 3]) > 0.005
     with pytest.raises(SkillFailure, match="standing on its edge"):
         pick_up_path(ctx, flat @ _rot_x(np.deg2rad(80.0)), 2.8)
+
+
+def test_a_needle_in_a_port_is_caught_and_one_on_the_tissue_beyond_the_ridge_is_not():
+    from suture_bt.geometry import NeedleModel, PhantomModel
+    from suture_bt.planning import plan_needle_arc
+    from suture_bt.skills.dropped import caught_in_tissue
+
+    phantom = PhantomModel()
+    ctx = SimpleNamespace(phantom=phantom, needle=NeedleModel())
+    arc = plan_needle_arc(*phantom.pair(2), NeedleModel())
+    assert caught_in_tissue(ctx, arc.needle_pose(np.deg2rad(30.0))).startswith("hanging in entry2")
+    # Seen in a run: dropped in the hand-back, lying turned over on the exit side of the ridge
+    # level with pair 2 (entry 2's axis, continued through the ridge, passes under it).
+    beyond = _pose(_rot_x(np.pi), (0.0174, 0.0224, 0.0712))
+    assert caught_in_tissue(ctx, beyond) == ""
 
 
 @pytest.mark.parametrize("phi_deg", [0.0, 40.0, 90.0])
