@@ -46,6 +46,18 @@ class JawHoldsSomething(_Condition):
         return closed and ok, detail if closed else f"jaw open at {angle:.2f} rad"
 
 
+class JawEmpty(_Condition):
+    """The arm's jaw holds nothing: open, or closed all the way (no wire between its blades)."""
+
+    def __init__(self, arm: str, name: str | None = None):
+        super().__init__(name or f"{arm.upper()} jaw empty?")
+        self.arm = arm
+
+    def ask(self) -> tuple[bool, str]:
+        held, detail = jaw_holds_wire(self.context.arm(self.arm).jaw_angle())
+        return not held, detail
+
+
 class NeedleLocalised(_Condition):
     """The tree has a needle estimate (held: with the holder's in-hand transform)."""
 

@@ -68,8 +68,31 @@ def test_the_resting_fraction_changes_only_the_needle_start():
         Randomization(resting_place="anywhere")
 
 
+def test_default_phantom_draws_are_kept_and_wide_ones_keep_every_port_in_view():
+    from suture_bt.campaign.randomize import PORT_MARGIN_PX, _rng
+    from suture_bt.campaign.resting_start import in_view
+    from suture_bt.geometry import PhantomModel
+    from suture_bt.sim.camera import stereo_model
+    from suture_bt.transforms import pose_to_transform
+
+    config = CampaignConfig(seed=9966575095)
+    for i in range(30):  # the first draw, as campaigns before the view check drew it
+        g = _rng(9966575095 + i, "phantom")
+        xy, z = g.uniform(-1.0, 1.0, 2) * 3e-3, g.uniform(-1.0, 1.0) * 1.5e-3
+        assert draw(config, i)["phantom"]["position"] == [round(v, 6) for v in (*xy, z)]
+    wide = Randomization(phantom_xy_mm=25, phantom_z_mm=5, phantom_yaw_deg=25, tilt_deg=6)
+    camera, moved = stereo_model(1920, 1080), 0
+    for i in range(30):
+        ph = draw(CampaignConfig(seed=9600000, randomization=wide), i)["phantom"]
+        T = pose_to_transform(ph["position"], ph["rpy"])
+        ports = np.array([port.position for port in PhantomModel(T).ports()])
+        assert in_view(camera, ports, PORT_MARGIN_PX)
+        moved += np.hypot(*ph["position"][:2]) > 0.015
+    assert moved >= 5  # the wide range is still used
+
+
 def test_resting_starts_lie_flat_on_the_tissue_in_both_views_and_move_with_the_phantom():
-    from suture_bt.campaign.resting_start import MARGIN_PX, _in_view
+    from suture_bt.campaign.resting_start import MARGIN_PX, in_view
     from suture_bt.geometry import NeedleModel
     from suture_bt.sim.camera import stereo_model
     from suture_bt.transforms import invert, pose_to_transform
@@ -84,9 +107,12 @@ def test_resting_starts_lie_flat_on_the_tissue_in_both_views_and_move_with_the_p
         T = pose_to_transform(d["needle"]["position"], d["needle"]["rpy"])
         local = invert(T_wp) @ T
         assert abs(local[2, 2]) > 0.999  # the needle's plane is the tissue's
-        assert 0.022 <= abs(local[0, 3]) <= 0.036  # beside the ridge, on the block
+        assert 0.022 <= abs(local[0, 3]) <= 0.036  # beside the ridge
+        ends = (local @ np.c_[NeedleModel().centerline(25), np.ones(25)].T)[:2].T
+        assert np.all(np.abs(ends[:, 0]) <= 0.042) and np.all(ends[:, 1] >= -0.052)  # on the block
+        assert np.all(ends[:, 1] <= 0.072)
         faces.add(bool(local[2, 2] < 0))
-        assert _in_view(camera, arc @ T[:3, :3].T + T[:3, 3], MARGIN_PX)
+        assert in_view(camera, arc @ T[:3, :3].T + T[:3, 3], MARGIN_PX)
     assert faces == {True, False}  # face up and face down both drawn
 
 

@@ -99,6 +99,31 @@ def test_single_throw_from_a_needle_resting_on_the_tissue_picks_it_up_and_passes
     assert "Pick up the needle with PSM2" in ran and not any("hands" in b for b in ran)
 
 
+@pytest.mark.slow
+def test_a_resting_needle_psm2_cannot_reach_is_picked_up_by_psm1_and_handed_over():
+    scene = scene_from_dict(
+        {
+            # Turned over, far along the ridge on PSM1's side: beyond PSM2's insertion limit.
+            "needle": {
+                "start": "pose",
+                "position": [0.032, -0.038, 0.0727],
+                "rpy": [np.pi, 0, 0.6],
+            },
+            "arms": {"psm1": {"joint_offset": "C"}, "psm2": {"joint_offset": "C"}},
+        }
+    )
+    result, session = _run(RunOptions(tree="single_throw"), scene)
+    (throw,) = result["throws"]
+    assert throw["passed"], throw
+    status = {
+        r["behaviour"]: (r["status"], r.get("failure") or "") for r in session.context.reports
+    }
+    assert status["Pick up the needle with PSM2"][0] == "FAILURE"
+    assert "out of psm2's reach" in status["Pick up the needle with PSM2"][1]
+    assert status["Pick up the needle with PSM1"][0] == "SUCCESS"
+    assert status["PSM1 hands the picked up needle to PSM2"][0] == "SUCCESS"
+
+
 def test_run_scene_defaults_to_the_task3_start_and_takes_the_seed():
     scene = run_scene(RunOptions(seed=7))
     assert scene.needle.start == "in_psm2_jaw" and scene.seed == 7

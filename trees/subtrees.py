@@ -51,6 +51,7 @@ from suture_bt.behaviours.actions import (
 from suture_bt.behaviours.conditions import (
     CalibrationLost,
     GraspMissed,
+    JawEmpty,
     JawHoldsSomething,
     NeedleDropped,
     NeedleLocalised,
@@ -114,7 +115,7 @@ def prepare(pairs: tuple[int, ...]) -> py_trees.behaviour.Behaviour:
     from_tissue = py_trees.composites.Sequence(
         "Prepare from the tissue",
         memory=True,
-        children=[Calibrate(PULLER), Calibrate(INSERTER), *pick_up_children(grasp)],
+        children=[Calibrate(PULLER), Calibrate(INSERTER), picked_up_from_tissue(grasp, pairs[0])],
     )
     choose = py_trees.idioms.either_or(
         conditions=[
@@ -193,9 +194,32 @@ def in_reach(pairs: tuple[int, ...]) -> py_trees.behaviour.Behaviour:
     return PairsInReach(pairs, INSERTER, PULLER, name=f"All of {label} in reach?")
 
 
-def pick_up_children(grasp) -> list[py_trees.behaviour.Behaviour]:
-    """Localise the resting needle and pick it up with PSM2 at the throws' grasp."""
-    return [PickUpNeedle(INSERTER, grasp)]
+def picked_up_from_tissue(grasp, first_pair: int) -> py_trees.behaviour.Behaviour:
+    """Localise the resting needle and pick it up with PSM2 at the throws' grasp; when PSM2
+    cannot (out of its reach, refused), PSM1 picks it up clear of that grasp and hands it to
+    PSM2."""
+    by_psm1 = py_trees.composites.Sequence(
+        "PSM1 picks it up and hands it to PSM2",
+        memory=True,
+        children=[
+            JawEmpty(INSERTER, name="PSM2's jaw empty?"),
+            PickUpNeedle(PULLER, away_from_holder_and(grasp)),
+            retried_handover(
+                HandOver(
+                    PULLER,
+                    INSERTER,
+                    grasp,
+                    next_pair=first_pair,
+                    name="PSM1 hands the picked up needle to PSM2",
+                )
+            ),
+        ],
+    )
+    return py_trees.composites.Selector(
+        "Pick up with PSM2, else PSM1 and hand over",
+        memory=True,
+        children=[PickUpNeedle(INSERTER, grasp), by_psm1],
+    )
 
 
 def insert_while_standing_by(pair: int) -> py_trees.behaviour.Behaviour:

@@ -13,7 +13,8 @@ gives the same scene on any machine or backend:
   this camera: no tree can find it from images);
 * the phantom pose, jittered about the base scene's: ± ``phantom_xy_mm`` / ``phantom_z_mm``,
   ± ``phantom_yaw_deg`` about the vertical and ± ``tilt_deg`` of roll and pitch (defaults: a few
-  mm and degrees; wider ranges stand in for held-out scenes);
+  mm and degrees; wider ranges stand in for held-out scenes), drawn again while a port would
+  lie outside either image;
 * the camera's noise and brightness (inside the perception training ranges);
 * the low-level servo's bandwidth, damping, friction and load, per arm and joint, drawn by the
   world from the scene seed over the ranges of ``fault_profiles.yaml`` (``servo = "drawn"``,
@@ -40,6 +41,8 @@ SERVO_PROFILE = "mild"
 #: Widest phantom jitter a campaign accepts (mm, deg): beyond it the ports leave the arms'
 #: reach or the cameras' view, and trials would measure the scene, not the tree.
 MAX_MOVE_MM, MAX_YAW_DEG, MAX_TILT_DEG = 50.0, 45.0, 15.0
+#: Every port at least this far inside both images (px), in this many phantom draws.
+PORT_MARGIN_PX, PHANTOM_TRIES = 40.0, 200
 
 
 def servo_ranges(profile: str = SERVO_PROFILE) -> dict[str, list[float]]:
@@ -154,18 +157,7 @@ def draw(config: CampaignConfig, index: int) -> dict[str, Any]:
         if rz.resting_place == "src"
         else None  # drawn below, once the phantom pose is known
     )
-    g = _rng(seed, "phantom")
-    xy = g.uniform(-1.0, 1.0, 2) * rz.phantom_xy_mm * 1e-3
-    z = g.uniform(-1.0, 1.0) * rz.phantom_z_mm * 1e-3
-    roll, pitch = np.deg2rad(g.uniform(-1.0, 1.0, 2) * rz.tilt_deg)
-    yaw = np.deg2rad(g.uniform(-1.0, 1.0) * rz.phantom_yaw_deg)
-    base_phantom = config.scene_raw.get("phantom", {})
-    p0 = base_phantom.get("position", [0.0, 0.0, 0.0])
-    r0 = base_phantom.get("rpy", [0.0, 0.0, 0.0])
-    out["phantom"] = {
-        "position": [_r(p0[0] + xy[0], 6), _r(p0[1] + xy[1], 6), _r(p0[2] + z, 6)],
-        "rpy": [_r(r0[0] + roll, 6), _r(r0[1] + pitch, 6), _r(r0[2] + yaw, 6)],
-    }
+    out["phantom"] = _phantom_in_view(config, _rng(seed, "phantom"))
     if out["needle"] is None:
         out["needle"] = _resting_in_view(config, seed, out["phantom"])
     g = _rng(seed, "camera")
@@ -179,15 +171,42 @@ def draw(config: CampaignConfig, index: int) -> dict[str, Any]:
     return out
 
 
-def _resting_in_view(config: CampaignConfig, seed: int, phantom: dict[str, Any]) -> dict[str, Any]:
-    """A resting start drawn on the tissue in both views of the trial's camera."""
-    from suture_bt.campaign.resting_start import resting_in_view
+def _phantom_in_view(config: CampaignConfig, g: np.random.Generator) -> dict[str, Any]:
+    """The phantom pose jittered about the base scene's; a draw that puts a port outside
+    either image (``PORT_MARGIN_PX`` to spare) is drawn again (the tree confirms the emerged
+    tip from images: such a scene measures the camera's placement, not the tree). Within the
+    default ranges every first draw is kept."""
+    from suture_bt.campaign.resting_start import camera_of, in_view
+    from suture_bt.geometry import PhantomModel
     from suture_bt.transforms import pose_to_transform
 
-    camera = config.scene_raw.get("camera") or {}
-    size = int(camera.get("width", 1920)), int(camera.get("height", 1080))
+    rz, base = config.randomization, config.scene_raw.get("phantom", {})
+    p0 = base.get("position", [0.0, 0.0, 0.0])
+    r0 = base.get("rpy", [0.0, 0.0, 0.0])
+    camera = camera_of(config.scene_raw)
+    for _ in range(PHANTOM_TRIES):
+        xy = g.uniform(-1.0, 1.0, 2) * rz.phantom_xy_mm * 1e-3
+        z = g.uniform(-1.0, 1.0) * rz.phantom_z_mm * 1e-3
+        roll, pitch = np.deg2rad(g.uniform(-1.0, 1.0, 2) * rz.tilt_deg)
+        yaw = np.deg2rad(g.uniform(-1.0, 1.0) * rz.phantom_yaw_deg)
+        pose = {
+            "position": [_r(p0[0] + xy[0], 6), _r(p0[1] + xy[1], 6), _r(p0[2] + z, 6)],
+            "rpy": [_r(r0[0] + roll, 6), _r(r0[1] + pitch, 6), _r(r0[2] + yaw, 6)],
+        }
+        T = pose_to_transform(pose["position"], pose["rpy"])
+        ports = np.array([port.position for port in PhantomModel(T).ports()])
+        if in_view(camera, ports, PORT_MARGIN_PX):
+            return pose
+    raise ValueError(f"no phantom pose with every port in view after {PHANTOM_TRIES} draws")
+
+
+def _resting_in_view(config: CampaignConfig, seed: int, phantom: dict[str, Any]) -> dict[str, Any]:
+    """A resting start drawn on the tissue in both views of the trial's camera."""
+    from suture_bt.campaign.resting_start import camera_of, resting_in_view
+    from suture_bt.transforms import pose_to_transform
+
     T_world_phantom = pose_to_transform(phantom["position"], phantom["rpy"])
-    return resting_in_view(_rng(seed, "resting"), T_world_phantom, *size)
+    return resting_in_view(_rng(seed, "resting"), T_world_phantom, camera_of(config.scene_raw))
 
 
 def _faults(profile: str, servo: str) -> str | dict[str, Any] | None:

@@ -3,9 +3,10 @@
 The SRC start pose lies below the bottom edge of this camera's image, so a campaign that wants
 to measure resting starts draws its own: the needle's centre beside the ridge (clear of its
 flanks), turned about the vertical at random, face up or face down, a millimetre above the
-tissue (physics lets it settle), and every point of its arc at least ``MARGIN_PX`` inside both
-images. Drawn in the phantom frame, so it moves with the phantom. This is evaluation code: it
-uses the simulator's camera model to pick scenes, never to help a tree.
+tissue (physics lets it settle), every point of its arc over the block (``EDGE_MARGIN`` from
+its edges) and at least ``MARGIN_PX`` inside both images. Drawn in the phantom frame, so it
+moves with the phantom. This is evaluation code: it uses the simulator's camera model to pick
+scenes, never to help a tree.
 """
 
 from __future__ import annotations
@@ -15,7 +16,7 @@ from typing import Any
 import numpy as np
 
 from suture_bt.geometry import NeedleModel
-from suture_bt.geometry.phantom import TISSUE_TOP_Z
+from suture_bt.geometry.phantom import TISSUE_TOP_Z, TISSUE_X, TISSUE_Y
 from suture_bt.transforms import matrix_to_rpy, pose_to_transform
 
 #: Needle centre's distance from the ridge line x = 0 (phantom frame, m): clear of the flanks
@@ -25,12 +26,22 @@ CENTRE_X = (0.022, 0.036)
 CENTRE_Y = (-0.045, 0.045)
 #: Height of the needle frame above the tissue top when it is let go (wire radius + 1 mm).
 DROP_Z = 0.00136
+#: Every arc point at least this far inside the tissue block's edges (m).
+EDGE_MARGIN = 0.003
 #: Every arc point at least this far inside both images (px).
 MARGIN_PX = 40.0
 TRIES = 200
 
 
-def _in_view(camera: Any, points_world: np.ndarray, margin: float) -> bool:
+def camera_of(scene_raw: dict[str, Any]) -> Any:
+    """The stereo camera model of a (raw) scene's resolution."""
+    from suture_bt.sim.camera import stereo_model
+
+    camera = scene_raw.get("camera") or {}
+    return stereo_model(int(camera.get("width", 1920)), int(camera.get("height", 1080)))
+
+
+def in_view(camera: Any, points_world: np.ndarray, margin: float) -> bool:
     """Whether all points project at least ``margin`` px inside both eyes' images."""
     for cam in (camera.left, camera.right):
         T = np.linalg.inv(cam.T_world_cam)
@@ -46,16 +57,23 @@ def _in_view(camera: Any, points_world: np.ndarray, margin: float) -> bool:
     return True
 
 
+def _on_block(points_phantom: np.ndarray) -> bool:
+    """Whether every point lies over the tissue block, ``EDGE_MARGIN`` inside its edges."""
+    x, y = points_phantom[:, 0], points_phantom[:, 1]
+    m = EDGE_MARGIN
+    return bool(
+        np.all((TISSUE_X[0] + m <= x) & (x <= TISSUE_X[1] - m))
+        and np.all((TISSUE_Y[0] + m <= y) & (y <= TISSUE_Y[1] - m))
+    )
+
+
 def resting_in_view(
-    rng: np.random.Generator, T_world_phantom: np.ndarray, width: int, height: int
+    rng: np.random.Generator, T_world_phantom: np.ndarray, camera: Any
 ) -> dict[str, Any]:
     """A ``needle:`` scene section (``start: pose``) resting on the tissue in both views.
 
     Raises ``ValueError`` when no place in ``TRIES`` draws is in view (a phantom moved so far
     that its flat tissue has left the images)."""
-    from suture_bt.sim.camera import stereo_model
-
-    camera = stereo_model(width, height)
     model = NeedleModel()
     arc = model.centerline(25)
     for _ in range(TRIES):
@@ -67,9 +85,12 @@ def resting_in_view(
         T_local = pose_to_transform(
             (x, y, TISSUE_TOP_Z + DROP_Z), (np.pi if flipped else 0.0, 0.0, yaw)
         )
+        local = arc @ T_local[:3, :3].T + T_local[:3, 3]
+        if not _on_block(local):
+            continue
         T = T_world_phantom @ T_local
         points = arc @ T[:3, :3].T + T[:3, 3]
-        if _in_view(camera, points, MARGIN_PX):
+        if in_view(camera, points, MARGIN_PX):
             return {
                 "start": "pose",
                 "position": [round(float(v), 6) for v in T[:3, 3]],
