@@ -124,6 +124,44 @@ def test_a_resting_needle_psm2_cannot_reach_is_picked_up_by_psm1_and_handed_over
     assert status["PSM1 hands the picked up needle to PSM2"][0] == "SUCCESS"
 
 
+@pytest.mark.slow
+def test_a_needle_seen_behind_psm1s_calibration_jaw_is_picked_up_before_psm1_calibrates():
+    # A development campaign's scene (seed 9610009): the phantom moved and turned, the needle
+    # resting where the left camera sees it across PSM1's jaw at the calibration pose.
+    from suture_bt.campaign.randomize import servo_ranges
+
+    scene = scene_from_dict(
+        {
+            "seed": 9610009,
+            "arms": {
+                "psm1": {"joint_offset": [-0.217, 3.704, -3.081]},
+                "psm2": {"joint_offset": [0.739, 1.183, 4.589]},
+            },
+            "needle": {
+                "start": "pose",
+                "position": [0.045225, 0.027078, 0.075317],
+                "rpy": [-0.041216, 0.058327, 0.756428],
+            },
+            "phantom": {
+                "position": [0.014718, 0.00682, 0.004323],
+                "rpy": [-0.070856, -0.00886, -0.322854],
+            },
+            "camera": {"noise_std": 1.372, "brightness": 0.885},
+            "faults": {"profile": "none", "servo": servo_ranges()},  # drawn from the seed
+        }
+    )
+    result, session = _run(RunOptions(tree="single_throw"), scene)
+    (throw,) = result["throws"]
+    assert throw["passed"], throw
+    status = {
+        r["behaviour"]: (r["status"], r.get("failure") or "") for r in session.context.reports
+    }
+    assert status["Calibrate PSM1"][0] == "FAILURE"
+    assert "keypoint" in status["Calibrate PSM1"][1]
+    for later in ("PSM2 picks the needle up first", "Calibrate PSM1 (needle held)"):
+        assert status[later][0] == "SUCCESS"
+
+
 def test_run_scene_defaults_to_the_task3_start_and_takes_the_seed():
     scene = run_scene(RunOptions(seed=7))
     assert scene.needle.start == "in_psm2_jaw" and scene.seed == 7

@@ -112,10 +112,21 @@ def prepare(pairs: tuple[int, ...]) -> py_trees.behaviour.Behaviour:
     from_jaw = py_trees.composites.Selector(
         "Lay the needle down, else present it", memory=True, children=[laid_down, presented]
     )
-    from_tissue = py_trees.composites.Sequence(
+    from_tissue = py_trees.composites.Selector(
         "Prepare from the tissue",
         memory=True,
-        children=[Calibrate(PULLER), Calibrate(INSERTER), picked_up_from_tissue(grasp, pairs[0])],
+        children=[
+            py_trees.composites.Sequence(
+                "Calibrate both arms, then pick the needle up",
+                memory=True,
+                children=[
+                    Calibrate(PULLER),
+                    Calibrate(INSERTER),
+                    picked_up_from_tissue(grasp, pairs[0]),
+                ],
+            ),
+            picked_up_before_psm1_calibrates(grasp),
+        ],
     )
     choose = py_trees.idioms.either_or(
         conditions=[
@@ -192,6 +203,35 @@ def in_reach(pairs: tuple[int, ...]) -> py_trees.behaviour.Behaviour:
     """Both arms can reach the planned poses of the throws through ``pairs``."""
     label = f"pair {pairs[0]}" if len(pairs) == 1 else "pairs"
     return PairsInReach(pairs, INSERTER, PULLER, name=f"All of {label} in reach?")
+
+
+def picked_up_before_psm1_calibrates(grasp) -> py_trees.behaviour.Behaviour:
+    """The resting start's second way, when the first failed (e.g. the needle lies where the
+    cameras see it behind PSM1's jaw at its calibration pose, and the keypoints are lost in
+    it): PSM2 calibrates and picks the needle up, which takes it out of that sight, then PSM1
+    calibrates (what the first way finished is skipped)."""
+    return py_trees.composites.Sequence(
+        "Else PSM2 picks it up first, then PSM1 calibrates",
+        memory=True,
+        children=[
+            JawEmpty(PULLER, name="PSM1's jaw empty?"),
+            SkipWhen(
+                "Unless PSM2 is calibrated",
+                Calibrate(INSERTER, name="Calibrate PSM2 (first)"),
+                calibrated(INSERTER),
+            ),
+            SkipWhen(
+                "Unless PSM2 holds the needle",
+                PickUpNeedle(INSERTER, grasp, name="PSM2 picks the needle up first"),
+                holds_needle(INSERTER),
+            ),
+            SkipWhen(
+                "Unless PSM1 is calibrated",
+                Calibrate(PULLER, name="Calibrate PSM1 (needle held)"),
+                calibrated(PULLER),
+            ),
+        ],
+    )
 
 
 def picked_up_from_tissue(grasp, first_pair: int) -> py_trees.behaviour.Behaviour:
