@@ -38,7 +38,7 @@ def _randomization(config: dict[str, Any]) -> list[str]:
     place = (
         "at the SRC start pose (below the image)"
         if rz.get("resting_place") == "src"
-        else "at a place drawn on the tissue in both views, either face up"
+        else "at a place drawn on the tissue in both views, face up or down"
     )
     start = f"in PSM2's jaw at a grasp arc angle drawn in [{lo:g}, {hi:g}]°" + (
         f"; {100 * rest:.0f} % of trials resting on the tissue {place}" if rest else " (jaw-only)"
