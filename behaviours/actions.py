@@ -137,12 +137,14 @@ class FindDroppedNeedle(SkillBehaviour):
     """Recovery after a drop: let go, localise the fallen needle, check ``picker`` can take it
     at ``angle(context)`` (else fail saying why: in the tissue, on its edge, out of reach)."""
 
-    def __init__(self, picker: str, angle: AngleRule, name: str | None = None):
+    def __init__(
+        self, picker: str, angle: AngleRule, pair: int | None = None, name: str | None = None
+    ):
         super().__init__(name or "Find the dropped needle")
-        self.picker, self.angle = picker, angle
+        self.picker, self.angle, self.pair = picker, angle, pair
 
     def make_skill(self):
-        return FindDropped(self.context, self.picker, self.angle(self.context))
+        return FindDropped(self.context, self.picker, self.angle(self.context), self.pair)
 
 
 class LayDownNeedle(SkillBehaviour):

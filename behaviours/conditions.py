@@ -11,7 +11,7 @@ from py_trees.common import Status
 
 from suture_bt.behaviours.skill_behaviour import needs
 from suture_bt.skills.checks import JAW_CLOSED_MAX, jaw_holds_wire
-from suture_bt.skills.dropped import dropped_by
+from suture_bt.skills.dropped import dropped_by, hanging_in_pair
 from suture_bt.skills.reach import pair_reach
 
 
@@ -56,6 +56,22 @@ class JawEmpty(_Condition):
     def ask(self) -> tuple[bool, str]:
         held, detail = jaw_holds_wire(self.context.arm(self.arm).jaw_angle())
         return not held, detail
+
+
+class NeedleHangingInPair(_Condition):
+    """The free needle's estimate lies on pair ``pair``'s circle, its tip out past the exit:
+    dropped while being pulled through, the extraction can take it again."""
+
+    def __init__(self, pair: int, name: str | None = None):
+        super().__init__(name or f"Needle hanging in pair {pair}?")
+        self.pair = pair
+
+    def ask(self) -> tuple[bool, str]:
+        b = self.context.belief
+        if b is None or b.holder is not None:
+            return False, "no estimate of a free needle"
+        why_not = hanging_in_pair(self.context, b.T_world_needle, self.pair)
+        return not why_not, why_not or f"on pair {self.pair}'s circle, its tip out"
 
 
 class NeedleLocalised(_Condition):

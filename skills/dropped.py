@@ -33,6 +33,9 @@ from suture_bt.transforms import invert
 #: The fallen needle is given this long to come to rest before it is looked at (s); the arm
 #: that dropped it rises this far from the tissue first (m).
 SETTLE_S, RISE = 0.3, 0.010
+#: A needle hanging in the tissue that lies this close to the pair's planned circle (mm, deg)
+#: with its tip this far out past the exit (mm) is taken again by the extraction.
+ON_ARC_MM, ON_ARC_DEG, MIN_TIP_OUT_MM = 3.0, 15.0, 4.0
 #: A seen needle with a point this far under the tissue top or a port's surface, within
 #: ``PORT_RADIUS`` of that port (a ball, not a cylinder along the port's axis: the axis runs
 #: through the ridge and out over the flat tissue beyond it), is caught in the tissue (m).
@@ -69,6 +72,27 @@ def caught_in_tissue(context: TaskContext, T_world_needle: np.ndarray) -> str:
     return ""
 
 
+def hanging_in_pair(context: TaskContext, T_world_needle: np.ndarray, pair: int) -> str:
+    """'' when the needle lies on pair ``pair``'s planned circle with its tip out past the
+    exit far enough for the puller's grasp (dropped during the pull: the extraction can take
+    it again where it hangs); else why not."""
+    try:
+        arc = context.plan(pair, f"pair {pair}")
+    except SkillFailure as e:
+        return e.reason
+    phi, turn = arc.sweep_angle_of(T_world_needle[:3, :3])
+    off = float(np.linalg.norm(T_world_needle[:3, 3] - arc.needle_pose(phi)[:3, 3]))
+    if off > ON_ARC_MM * 1e-3 or np.rad2deg(turn) > ON_ARC_DEG:
+        return (
+            f"not on pair {pair}'s circle ({1e3 * off:.1f} mm, {np.rad2deg(turn):.0f}° off; "
+            f"≤ {ON_ARC_MM:g} mm, {ON_ARC_DEG:g}°)"
+        )
+    out = 1e3 * arc.tip_height_above_exit(phi)
+    if out < MIN_TIP_OUT_MM:
+        return f"its tip only {out:.1f} mm out past exit {pair} (< {MIN_TIP_OUT_MM:g} mm)"
+    return ""
+
+
 def pick_up_path(context: TaskContext, T_world_needle: np.ndarray, arc_angle: float):
     """The pick-up's tip poses (hover, grasp, lift) for this resting needle with the hand
     :class:`~suture_bt.skills.pick_up.PickUp` takes it with (the driving hand, or the turned
@@ -85,13 +109,17 @@ def pick_up_path(context: TaskContext, T_world_needle: np.ndarray, arc_angle: fl
 
 class FindDropped(Skill):
     """The needle fell from its holder: let go, localise it where it lies, and check that
-    ``picker`` can take it at ``arc_angle`` (rad) (the other arms' reach is reported)."""
+    ``picker`` can take it at ``arc_angle`` (rad) (the other arms' reach is reported), or,
+    in the throw through ``pair``, that it hangs on that pair's circle with its tip out (the
+    extraction takes it again)."""
 
     name = "find dropped needle"
 
-    def __init__(self, context: TaskContext, picker: str, arc_angle: float):
+    def __init__(
+        self, context: TaskContext, picker: str, arc_angle: float, pair: int | None = None
+    ):
         super().__init__(context)
-        self.picker, self.arc_angle = picker, float(arc_angle)
+        self.picker, self.arc_angle, self.pair = picker, float(arc_angle), pair
 
     def program(self) -> Waiting:
         ctx = self.context
@@ -117,6 +145,13 @@ class FindDropped(Skill):
             raise SkillFailure(f"needle dropped by {arm} and not found: {e.reason}") from None
         T = ctx.belief.T_world_needle.copy()
         where = caught_in_tissue(ctx, T)
+        if where and self.pair is not None:
+            why_not = hanging_in_pair(ctx, T, self.pair)
+            if not why_not:
+                self.report.update(hanging_in_pair=self.pair, T_world_needle=T.tolist())
+                self.say(f"needle dropped by {arm} {where}, on pair {self.pair}'s circle")
+                return
+            where = f"{where}, {why_not}"
         if where:
             raise SkillFailure(f"needle dropped by {arm} and {where}: it cannot be picked up")
         try:

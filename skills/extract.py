@@ -5,6 +5,10 @@ jaw's measured angle must show the wire), the inserting arm opens and backs off,
 continues the planned circle until the needle's base has left the exit, lifts it along the exit
 normal, and a fresh image must show the needle clear of the tissue and where the puller's
 gripper put it.
+
+A needle the puller dropped while pulling hangs in the tissue on the pair's circle with no
+holder (``FindDropped`` found it there): the same skill takes it again where it hangs (no
+inserter to let go) and pulls it through from its sweep angle; the report says ``resumed``.
 """
 
 from __future__ import annotations
@@ -38,12 +42,16 @@ class Extract(Skill):
         ctx = self.context
         puller, inserter = ctx.arm(self.puller), ctx.arm(self.inserter)
         where = f"pair {self.pair}"
-        ctx.held_by(self.inserter, where)
+        resumed = ctx.belief is not None and ctx.belief.holder is None
+        if not resumed:
+            ctx.held_by(self.inserter, where)
+        self.report["resumed"] = resumed
         _, exit_ = ctx.phantom.pair(self.pair)
         arc = ctx.plan(self.pair, where)
         T_needle = ctx.predicted_needle()
         goal = tip_goal(T_needle, pulling_hand(ctx.needle))
-        self.say(f"{where}: {self.puller} takes the emerged tip")
+        what = "the needle hanging in the tissue" if resumed else "the emerged tip"
+        self.say(f"{where}: {self.puller} takes {what}")
         puller.arm.jaw.move_jp(np.array([JAW_OPEN]))  # opens on the way
         try:
             yield from move_to(ctx.clock, puller, [backed_off(goal, APPROACH)], "approach the tip")
@@ -53,11 +61,15 @@ class Extract(Skill):
         yield from move_to(ctx.clock, puller, [goal], "reach the tip", FINE, joint_ok=False)
         yield from jaw_to(puller, 0.0)
         self.check(f"needle in {self.puller}'s jaw", *checks.jaw_holds_wire(puller.jaw_angle()))
-        self.say(f"{where}: {self.inserter} lets go")
-        yield from let_go(inserter, JAW_OPEN)
-        yield from move_to(
-            ctx.clock, inserter, [backed_off(inserter.commanded_tip_world(), BACK_OFF)], "back off"
-        )
+        if not resumed:
+            self.say(f"{where}: {self.inserter} lets go")
+            yield from let_go(inserter, JAW_OPEN)
+            yield from move_to(
+                ctx.clock,
+                inserter,
+                [backed_off(inserter.commanded_tip_world(), BACK_OFF)],
+                "back off",
+            )
         ctx.belief.holder = self.puller
         ctx.belief.T_tip_needle = np.linalg.inv(puller.tip_world()) @ T_needle
         T_gn = ctx.belief.T_tip_needle.copy()

@@ -54,6 +54,7 @@ from suture_bt.behaviours.conditions import (
     JawEmpty,
     JawHoldsSomething,
     NeedleDropped,
+    NeedleHangingInPair,
     NeedleLocalised,
     NeedleStillHeld,
     PairsInReach,
@@ -402,16 +403,34 @@ def regrasp(
 
 def picked_up_again(pair: int, later_pairs: tuple[int, ...]) -> py_trees.behaviour.Behaviour:
     """After a drop: let go, find the needle where it fell, and PSM2 picks it up at the grasp
-    the pairs still to do need (fails saying why when it cannot: in the tissue, on its edge,
-    out of reach, not found)."""
+    the pairs still to do need, or, hanging on this pair's circle with its tip out (dropped
+    while pulled), PSM1 takes it again and pulls it through (fails saying why when it cannot:
+    elsewhere in the tissue, on its edge, out of reach, not found)."""
     grasp = grasp_for_remaining(pair, later_pairs)
+    re_take = py_trees.composites.Sequence(
+        f"PSM1 takes it again in pair {pair}",
+        memory=True,
+        children=[
+            NeedleHangingInPair(pair),
+            ExtractNeedle(
+                PULLER, INSERTER, pair, name=f"Pull the dropped needle through pair {pair}"
+            ),
+        ],
+    )
     return py_trees.composites.Sequence(
         f"Pick up the needle dropped in pair {pair}",
         memory=True,
         children=[
             NeedleDropped(),
-            FindDroppedNeedle(INSERTER, grasp),
-            PickUpNeedle(INSERTER, grasp, name="PSM2 picks the dropped needle up"),
+            FindDroppedNeedle(INSERTER, grasp, pair),
+            py_trees.composites.Selector(
+                f"Hanging in pair {pair}: pull it through, else pick it up",
+                memory=True,
+                children=[
+                    re_take,
+                    PickUpNeedle(INSERTER, grasp, name="PSM2 picks the dropped needle up"),
+                ],
+            ),
         ],
     )
 
