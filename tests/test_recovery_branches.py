@@ -435,3 +435,23 @@ def test_one_wrong_answer_in_the_in_hand_check_is_refuted_by_a_second_look(sessi
     assert not any("slipped needle" in r["behaviour"] for r in session.context.reports)
     assert throw["status"] == "SUCCESS", throw["reason"]
     assert passed(session), session.scores()[0].failure
+
+
+def test_a_needle_hanging_on_its_pairs_circle_with_the_tip_out_can_be_taken_again():
+    from suture_bt.geometry import NeedleModel, PhantomModel
+    from suture_bt.planning import plan_needle_arc
+    from suture_bt.skills.context import TaskContext
+    from suture_bt.skills.dropped import hanging_in_pair
+
+    phantom, needle = PhantomModel(), NeedleModel()
+    ctx = SimpleNamespace(phantom=phantom, needle=needle)
+    ctx.plan = lambda pair, where: TaskContext.plan(ctx, pair, where)
+    arc = plan_needle_arc(*phantom.pair(3), needle)
+    pulled = arc.needle_pose(arc.insert_end_angle + 0.2)  # dropped while being pulled
+    assert hanging_in_pair(ctx, pulled, 3) == ""
+    assert hanging_in_pair(ctx, pulled, 2).startswith("not on pair 2's circle")
+    slid = pulled.copy()
+    slid[2, 3] -= 0.010  # slid 10 mm down the channel
+    assert hanging_in_pair(ctx, slid, 3).startswith("not on pair 3's circle")
+    early = arc.needle_pose(0.3)  # tip barely in: nothing out past the exit to take
+    assert "out past exit 3" in hanging_in_pair(ctx, early, 3)
