@@ -23,6 +23,15 @@ def _run(options: RunOptions, scene=None, out=None):
         session.close()
 
 
+def _passing_single_throw(scene) -> dict[str, tuple[str, str]]:
+    """Run ``single_throw`` on ``scene``, assert the throw passed, and return each behaviour's
+    last (status, failure reason) from the skills' reports."""
+    result, session = _run(RunOptions(tree="single_throw"), scene)
+    (throw,) = result["throws"]
+    assert throw["passed"], throw
+    return {r["behaviour"]: (r["status"], r.get("failure") or "") for r in session.context.reports}
+
+
 @pytest.mark.slow
 def test_multi_throw_passes_all_four_throws_under_condition_c(tmp_path):
     scene = scene_from_dict(
@@ -112,12 +121,7 @@ def test_a_resting_needle_psm2_cannot_reach_is_picked_up_by_psm1_and_handed_over
             "arms": {"psm1": {"joint_offset": "C"}, "psm2": {"joint_offset": "C"}},
         }
     )
-    result, session = _run(RunOptions(tree="single_throw"), scene)
-    (throw,) = result["throws"]
-    assert throw["passed"], throw
-    status = {
-        r["behaviour"]: (r["status"], r.get("failure") or "") for r in session.context.reports
-    }
+    status = _passing_single_throw(scene)
     assert status["Pick up the needle with PSM2"][0] == "FAILURE"
     assert "out of psm2's reach" in status["Pick up the needle with PSM2"][1]
     assert status["Pick up the needle with PSM1"][0] == "SUCCESS"
@@ -150,12 +154,7 @@ def test_a_needle_seen_behind_psm1s_calibration_jaw_is_picked_up_before_psm1_cal
             "faults": {"profile": "none", "servo": servo_ranges()},  # drawn from the seed
         }
     )
-    result, session = _run(RunOptions(tree="single_throw"), scene)
-    (throw,) = result["throws"]
-    assert throw["passed"], throw
-    status = {
-        r["behaviour"]: (r["status"], r.get("failure") or "") for r in session.context.reports
-    }
+    status = _passing_single_throw(scene)
     assert status["Calibrate PSM1"][0] == "FAILURE"
     assert "keypoint" in status["Calibrate PSM1"][1]
     for later in ("PSM2 picks the needle up first", "Calibrate PSM1 (needle held)"):

@@ -7,8 +7,8 @@ gives the same scene on any machine or backend:
 
 * both arms' hidden joint offsets, uniform over the full SRC bounds (±5°, ±5°, ±5 mm);
 * the needle start: in PSM2's jaw at a drawn grasp arc angle, or (with ``resting_fraction``
-  > 0) resting on the tissue: at a place drawn on the flat tissue beside the ridge, either face
-  up, turned at random and inside both cameras' views (``resting_place = "view"``, the
+  > 0) resting on the tissue: at a place drawn on the flat tissue beside the ridge, face up or
+  down, turned at random and inside both cameras' views (``resting_place = "view"``, the
   default), or at the SRC start pose (``"src"``, which lies below the image's bottom edge in
   this camera: no tree can find it from images);
 * the phantom pose, jittered about the base scene's: ± ``phantom_xy_mm`` / ``phantom_z_mm``,
@@ -157,9 +157,12 @@ def draw(config: CampaignConfig, index: int) -> dict[str, Any]:
         if rz.resting_place == "src"
         else None  # drawn below, once the phantom pose is known
     )
-    out["phantom"] = _phantom_in_view(config, _rng(seed, "phantom"))
+    from suture_bt.campaign.resting_start import camera_of
+
+    camera = camera_of(config.scene_raw)
+    out["phantom"] = _phantom_in_view(config, _rng(seed, "phantom"), camera)
     if out["needle"] is None:
-        out["needle"] = _resting_in_view(config, seed, out["phantom"])
+        out["needle"] = _resting_in_view(_rng(seed, "resting"), out["phantom"], camera)
     g = _rng(seed, "camera")
     out["camera"] = {
         "noise_std": _r(g.uniform(*rz.noise_std), 3),
@@ -171,19 +174,18 @@ def draw(config: CampaignConfig, index: int) -> dict[str, Any]:
     return out
 
 
-def _phantom_in_view(config: CampaignConfig, g: np.random.Generator) -> dict[str, Any]:
+def _phantom_in_view(config: CampaignConfig, g: np.random.Generator, camera: Any) -> dict[str, Any]:
     """The phantom pose jittered about the base scene's; a draw that puts a port outside
     either image (``PORT_MARGIN_PX`` to spare) is drawn again (the tree confirms the emerged
     tip from images: such a scene measures the camera's placement, not the tree). Within the
     default ranges every first draw is kept."""
-    from suture_bt.campaign.resting_start import camera_of, in_view
+    from suture_bt.campaign.resting_start import in_view
     from suture_bt.geometry import PhantomModel
     from suture_bt.transforms import pose_to_transform
 
     rz, base = config.randomization, config.scene_raw.get("phantom", {})
     p0 = base.get("position", [0.0, 0.0, 0.0])
     r0 = base.get("rpy", [0.0, 0.0, 0.0])
-    camera = camera_of(config.scene_raw)
     for _ in range(PHANTOM_TRIES):
         xy = g.uniform(-1.0, 1.0, 2) * rz.phantom_xy_mm * 1e-3
         z = g.uniform(-1.0, 1.0) * rz.phantom_z_mm * 1e-3
@@ -200,13 +202,15 @@ def _phantom_in_view(config: CampaignConfig, g: np.random.Generator) -> dict[str
     raise ValueError(f"no phantom pose with every port in view after {PHANTOM_TRIES} draws")
 
 
-def _resting_in_view(config: CampaignConfig, seed: int, phantom: dict[str, Any]) -> dict[str, Any]:
+def _resting_in_view(
+    g: np.random.Generator, phantom: dict[str, Any], camera: Any
+) -> dict[str, Any]:
     """A resting start drawn on the tissue in both views of the trial's camera."""
-    from suture_bt.campaign.resting_start import camera_of, resting_in_view
+    from suture_bt.campaign.resting_start import resting_in_view
     from suture_bt.transforms import pose_to_transform
 
     T_world_phantom = pose_to_transform(phantom["position"], phantom["rpy"])
-    return resting_in_view(_rng(seed, "resting"), T_world_phantom, camera_of(config.scene_raw))
+    return resting_in_view(g, T_world_phantom, camera)
 
 
 def _faults(profile: str, servo: str) -> str | dict[str, Any] | None:

@@ -42,17 +42,13 @@ def camera_of(scene_raw: dict[str, Any]) -> Any:
 
 
 def in_view(camera: Any, points_world: np.ndarray, margin: float) -> bool:
-    """Whether all points project at least ``margin`` px inside both eyes' images."""
+    """Whether all points lie in front of both eyes and project at least ``margin`` px inside
+    their images."""
     for cam in (camera.left, camera.right):
-        T = np.linalg.inv(cam.T_world_cam)
-        p = points_world @ T[:3, :3].T + T[:3, 3]
-        if np.any(p[:, 2] <= 0):
+        if np.any(cam.to_camera(points_world)[:, 2] <= 0):
             return False
-        u = cam.fx * p[:, 0] / p[:, 2] + cam.cx
-        v = cam.fy * p[:, 1] / p[:, 2] + cam.cy
-        if u.min() < margin or v.min() < margin:
-            return False
-        if u.max() > cam.width - margin or v.max() > cam.height - margin:
+        uv = cam.project(points_world)
+        if uv.min() < margin or np.any(uv.max(axis=0) > (cam.width - margin, cam.height - margin)):
             return False
     return True
 
