@@ -6,11 +6,13 @@ transform is gone), the arm that dropped it opens its jaw and rises, both arms l
 cameras' sight lines to where the needle most likely fell (straight below), the needle is given
 a moment to come to rest, and it is localised from images where it lies. Then, from that
 estimate alone, it says whether a pick-up can work: a needle caught in the tissue (hanging in
-a port), one standing on its edge (no jaw direction from above) or one out of the picking
-arm's reach fails the skill with a reason that starts "needle dropped by <arm> and ...", so the
-throw ends saying why. A needle lying turned over is taken with the turned hand, as the pick-up
-takes it (:func:`~suture_bt.skills.pick_up.turned_over_hand`); the throw that resumes sees that
-this grasp cannot reach its pair and re-takes it through PSM1 (``grasp_reaches``).
+a port: part of its arc inside the phantom's known tissue solid near a port), one on its edge
+with no side grasp clear of the tissue, or one out of the picking arm's reach fails the skill
+with a reason that starts "needle dropped by <arm> and ...", so the throw ends saying why. A
+needle lying turned over, or standing on its edge, is taken as the pick-up takes it
+(:mod:`~suture_bt.skills.resting_grasp`: the turned hand, or a side grasp); the throw that
+resumes sees when that grasp cannot reach its pair and re-takes it through PSM1
+(``grasp_reaches``).
 Output: the free belief (holder None) the pick-up starts from.
 """
 
@@ -19,15 +21,15 @@ from __future__ import annotations
 import numpy as np
 
 from suture_bt.geometry.phantom import TISSUE_TOP_Z
+from suture_bt.geometry.tissue_surface import height_above_tissue
 from suture_bt.skills import checks
 from suture_bt.skills.base import Skill, SkillFailure, Waiting
 from suture_bt.skills.context import NeedleBelief, TaskContext
-from suture_bt.skills.grasps import hand
 from suture_bt.skills.line_of_sight import clear_tip_pose
 from suture_bt.skills.localize_needle import LocalizeNeedle
 from suture_bt.skills.motion import feasible, jaw_to, move_to, together, wait
-from suture_bt.skills.pick_up import MAX_TILT, grasp_path, resting_tilt, turned_over_hand
 from suture_bt.skills.recover import JAW_OPEN
+from suture_bt.skills.resting_grasp import grasp_path, resting_grasps
 from suture_bt.transforms import invert
 
 #: The fallen needle is given this long to come to rest before it is looked at (s); the arm
@@ -36,9 +38,10 @@ SETTLE_S, RISE = 0.3, 0.010
 #: A needle hanging in the tissue that lies this close to the pair's planned circle (mm, deg)
 #: with its tip this far out past the exit (mm) is taken again by the extraction.
 ON_ARC_MM, ON_ARC_DEG, MIN_TIP_OUT_MM = 3.0, 15.0, 4.0
-#: A seen needle with a point this far under the tissue top or a port's surface, within
-#: ``PORT_RADIUS`` of that port (a ball, not a cylinder along the port's axis: the axis runs
-#: through the ridge and out over the flat tissue beyond it), is caught in the tissue (m).
+#: A seen needle with a point this far inside the phantom's known tissue solid (flat top and
+#: ridge, :mod:`~suture_bt.geometry.tissue_surface`; vertical depth) is caught in the tissue:
+#: hanging in a port when such a point lies within ``PORT_RADIUS`` of it (a ball: a port's
+#: axis runs through the ridge and out over the flat tissue beyond it) (m).
 UNDER_SURFACE, PORT_RADIUS = 0.001, 0.006
 
 
@@ -55,20 +58,22 @@ def dropped_by(context: TaskContext) -> tuple[str | None, str]:
 
 
 def caught_in_tissue(context: TaskContext, T_world_needle: np.ndarray) -> str:
-    """'' for a needle lying on the tissue; else where the seen arc goes into it."""
+    """'' for a needle lying on the tissue (or on the ridge, arched over it); else where the
+    seen arc goes into it."""
     pts = context.needle.centerline(60) @ T_world_needle[:3, :3].T + T_world_needle[:3, 3]
+    height = height_above_tissue(context.phantom, pts)
+    inside = height < -UNDER_SURFACE
+    if not inside.any():
+        return ""
+    depth = float(-height.min())
     for port in context.phantom.ports():
-        local = (pts - port.position) @ port.T[:3, :3]  # port frame: z along the normal
-        near = np.linalg.norm(local, axis=1) <= PORT_RADIUS
-        if np.any(near & (local[:, 2] < -UNDER_SURFACE)):
-            depth = float(-np.min(local[near, 2]))
+        near = np.linalg.norm(pts - port.position, axis=1) <= PORT_RADIUS
+        if np.any(near & inside):
             return f"hanging in {port.name} ({1e3 * depth:.1f} mm under its surface)"
     T_ph = invert(context.phantom.T_world_phantom)
     z = pts @ T_ph[:3, :3].T + T_ph[:3, 3]
-    below = float(TISSUE_TOP_Z - np.min(z[:, 2]))
-    near_block = float(np.min(np.abs(z[:, 2] - TISSUE_TOP_Z)))
-    if below > UNDER_SURFACE and near_block < 0.005:  # part of it under the top, part above
-        return f"stuck in the tissue ({1e3 * below:.1f} mm under its top)"
+    if np.min(np.abs(z[:, 2] - TISSUE_TOP_Z)) < 0.005:  # part of it under the top, part above
+        return f"stuck in the tissue ({1e3 * depth:.1f} mm under its surface)"
     return ""
 
 
@@ -93,18 +98,15 @@ def hanging_in_pair(context: TaskContext, T_world_needle: np.ndarray, pair: int)
     return ""
 
 
-def pick_up_path(context: TaskContext, T_world_needle: np.ndarray, arc_angle: float):
-    """The pick-up's tip poses (hover, grasp, lift) for this resting needle with the hand
-    :class:`~suture_bt.skills.pick_up.PickUp` takes it with (the driving hand, or the turned
-    one for a needle lying turned over); SkillFailure (its reason) for a needle on its edge."""
-    tilt, z_up = resting_tilt(context, T_world_needle)
-    if tilt > MAX_TILT:
-        raise SkillFailure(
-            f"standing on its edge (plane {np.rad2deg(tilt):.0f}° from the tissue, > "
-            f"{np.rad2deg(MAX_TILT):.0f}°): no grasp from above"
-        )
-    which = hand if z_up else turned_over_hand
-    return grasp_path(context, T_world_needle, which(context.needle, arc_angle))
+def pick_up_paths(context: TaskContext, T_world_needle: np.ndarray, arc_angle: float):
+    """The pick-up's tip poses (hover, grasp, lift) for this resting needle, one path per way
+    :class:`~suture_bt.skills.pick_up.PickUp` may take it (from above with the driving or the
+    turned hand, or from the side on its edge), preferred first; SkillFailure (its reason) for
+    a needle on its edge with no side grasp clear of the tissue."""
+    return [
+        grasp_path(context, T_world_needle, g.T_tip_needle)
+        for g in resting_grasps(context, T_world_needle, arc_angle)
+    ]
 
 
 class FindDropped(Skill):
@@ -155,11 +157,11 @@ class FindDropped(Skill):
         if where:
             raise SkillFailure(f"needle dropped by {arm} and {where}: it cannot be picked up")
         try:
-            path = pick_up_path(ctx, T, self.arc_angle)
+            paths = pick_up_paths(ctx, T, self.arc_angle)
         except SkillFailure as e:
             raise SkillFailure(f"needle dropped by {arm} and {e.reason}") from None
         names = [self.picker] + [n for n in ctx.arms if n != self.picker]
-        reach = {n: feasible(ctx.arm(n), path) for n in names}
+        reach = {n: _reach(ctx.arm(n), paths) for n in names}
         self.report["reach"] = reach
         if reach[self.picker]:
             others = [n for n in names[1:] if not reach[n]]
@@ -198,3 +200,9 @@ class FindDropped(Skill):
             if (name == dropper or cleared is not None) and not feasible(a, [T]):
                 moves.append(move_to(ctx.clock, a, [T], "make way for the cameras"))
         return moves
+
+
+def _reach(arm, paths: list[list[np.ndarray]]) -> str:
+    """'' when ``arm`` can follow one of ``paths``; else why not (the preferred path's)."""
+    whys = [feasible(arm, path) for path in paths]
+    return "" if not all(whys) else whys[0]

@@ -26,8 +26,8 @@ from suture_bt.skills.base import Skill, SkillFailure, Waiting
 from suture_bt.skills.context import ArmHandle, TaskContext
 from suture_bt.skills.grasps import GRASP_DEPTH, hand
 from suture_bt.skills.motion import FINE, feasible, jaw_to, move_to, wait
-from suture_bt.skills.pick_up import grasp_path
 from suture_bt.skills.recover import JAW_OPEN
+from suture_bt.skills.resting_grasp import grasp_path
 from suture_bt.transforms import make_transform, rpy_to_matrix
 
 #: Spots tried (phantom frame, m: x across the ridge, y along it), beside the ridge on either

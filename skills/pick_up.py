@@ -18,63 +18,39 @@ not the one the insertion planner drives with: before a throw the tree sees that
 cannot bring it to the entry (``grasp_reaches``) and re-grasps it through PSM1 (PSM2 → PSM1 →
 PSM2), which gave the driving hand back on both report runs whose laid-down needle flipped
 (an earlier check at 40-120° arc angles had found no handover that does; not re-checked).
-A needle on its edge (no jaw direction within ``MAX_TILT`` of straight down) is refused.
+A needle on its edge (no jaw direction within ``MAX_TILT`` of straight down: one dropped on
+its way to an entry comes to rest arched over the ridge) is taken from the side, at the arc
+angle nearest the asked one that stands clear of the tissue (:mod:`resting_grasp`); the held
+angle is then checked against that one.
 """
 
 from __future__ import annotations
 
 import numpy as np
 
-from suture_bt.geometry import NeedleModel
 from suture_bt.geometry.phantom import TISSUE_TOP_Z
 from suture_bt.skills import checks
 from suture_bt.skills.base import Skill, SkillFailure, Waiting
 from suture_bt.skills.context import ArmHandle, NeedleObservation, TaskContext
-from suture_bt.skills.grasps import GRASP_DEPTH, backed_off, hand, held_arc_angle, tip_goal
+from suture_bt.skills.grasps import backed_off, held_arc_angle
 from suture_bt.skills.line_of_sight import make_way
 from suture_bt.skills.localize_needle import LocalizeNeedle
 from suture_bt.skills.motion import FINE, feasible, jaw_to, move_to, together
-from suture_bt.transforms import invert, make_transform
+from suture_bt.skills.resting_grasp import (
+    APPROACH,
+    BLADE_BEYOND_TIP,
+    LIFT,
+    RestingGrasp,
+    grasp_path,
+    resting_grasps,
+    resting_tilt,
+)
+from suture_bt.transforms import invert
 
-#: The jaws come down along their length from this far back (m).
-APPROACH = 0.010
-#: The needle is lifted this far along the phantom's up axis once held (m).
-LIFT = 0.015
 #: Jaw opening for the approach (rad).
 JAW_OPEN = 0.8
-#: Largest angle (rad) between the jaws' direction and straight down (−phantom up).
-MAX_TILT = np.deg2rad(60.0)
-#: The blades reach this far beyond the tip control point along tip z (m; the blade length
-#: the world's grasp geometry uses).
-BLADE_BEYOND_TIP = 0.0019
 #: The grasp the images confirm must be this close to the asked arc angle (rad).
 ARC_TOLERANCE = np.deg2rad(10.0)
-
-
-def turned_over_hand(needle: NeedleModel, arc_angle: float) -> np.ndarray:
-    """T_tip_needle of the driving hand turned half a turn about the wire (tip x): tip z =
-    +needle z, the arc centre toward −tip y, the wire ``GRASP_DEPTH`` behind the tip."""
-    a = float(arc_angle)
-    tangent = np.array([np.sin(a), -np.cos(a), 0.0])
-    radial = np.array([np.cos(a), np.sin(a), 0.0])
-    R = np.stack([-tangent, -radial, [0.0, 0.0, 1.0]])  # rows: tip axes in the needle frame
-    return make_transform(R, np.array([0.0, 0.0, -GRASP_DEPTH]) - R @ needle.point_at(a))
-
-
-def resting_tilt(ctx: TaskContext, T_world_needle: np.ndarray) -> tuple[float, bool]:
-    """A resting needle's plane tilt from the tissue (rad) and whether its z points up."""
-    z_up = float(T_world_needle[:3, 2] @ ctx.phantom.T_world_phantom[:3, 2])
-    return float(np.arccos(min(1.0, abs(z_up)))), z_up >= 0.0
-
-
-def grasp_path(
-    ctx: TaskContext, T_world_needle: np.ndarray, T_tip_needle: np.ndarray
-) -> list[np.ndarray]:
-    """Tip poses of a pick-up from above: the hover back along the jaws, the grasp, the lift."""
-    goal = tip_goal(T_world_needle, T_tip_needle)
-    T_lift = goal.copy()
-    T_lift[:3, 3] += LIFT * ctx.phantom.T_world_phantom[:3, 2]
-    return [backed_off(goal, APPROACH), goal, T_lift]
 
 
 class PickUp(Skill):
@@ -114,8 +90,11 @@ class PickUp(Skill):
         ctx.needle_hint = None
         T_needle = ctx.belief.T_world_needle.copy()
 
-        T_hand, which = self._choose_hand(T_needle)
-        arm, goal = self._choose_arm(T_needle, T_hand)
+        arm, grasp, goal = self._choose_arm(T_needle, self._grasps(T_needle))
+        which = grasp.hand
+        if abs(grasp.arc_angle - self.arc_angle) > 1e-9:  # on its edge: the clear point
+            asked = float(np.rad2deg(grasp.arc_angle))
+            self.report["side_grasp_arc_angle_deg"] = asked
         hover = backed_off(goal, APPROACH)
         self.report.update(
             arm=arm.name,
@@ -161,48 +140,52 @@ class PickUp(Skill):
             abs(got - asked) <= np.rad2deg(ARC_TOLERANCE),
             f"seen held at {got:.0f}°, asked {asked:.0f}° (± {np.rad2deg(ARC_TOLERANCE):.0f}°)",
         )
-        note = "" if which == "driving" else " (turned over: not the driving hand)"
+        note = "" if which == "driving" else f" ({which}: not the driving hand from above)"
         self.say(f"{arm.name} holds the needle at {got:.0f}°{note}")
 
     # ---------------------------------------------------------------- helpers
-    def _choose_hand(self, T_needle: np.ndarray) -> tuple[np.ndarray, str]:
-        """The hand whose jaws come from above: driving when the needle's z points up."""
-        ctx = self.context
-        tilt, z_up = resting_tilt(ctx, T_needle)
+    def _grasps(self, T_needle: np.ndarray) -> list[RestingGrasp]:
+        """The ways this needle can be taken (from above, or from the side on its edge)."""
+        tilt, _ = resting_tilt(self.context, T_needle)
         self.report["needle_tilt_deg"] = float(np.rad2deg(tilt))
-        if tilt > MAX_TILT:
-            raise SkillFailure(
-                f"pick up: the needle stands on its edge (plane {np.rad2deg(tilt):.0f}° from "
-                f"the tissue, > {np.rad2deg(MAX_TILT):.0f}°): no grasp from above"
-            )
-        if z_up:
-            return hand(ctx.needle, self.arc_angle), "driving"
-        return turned_over_hand(ctx.needle, self.arc_angle), "turned over"
+        try:
+            return resting_grasps(self.context, T_needle, self.arc_angle)
+        except SkillFailure as e:
+            raise SkillFailure(f"pick up: the needle is {e.reason}") from None
 
-    def _choose_arm(self, T_needle: np.ndarray, T_hand: np.ndarray) -> tuple[ArmHandle, np.ndarray]:
-        """The named arm, or the first that reaches (calibrated arms first, nearest first)."""
+    def _choose_arm(
+        self, T_needle: np.ndarray, grasps: list[RestingGrasp]
+    ) -> tuple[ArmHandle, RestingGrasp, np.ndarray]:
+        """The named arm, or the first that reaches (calibrated arms first, nearest first),
+        with the first of ``grasps`` it reaches, and its grasp pose."""
         ctx = self.context
-        path = grasp_path(ctx, T_needle, T_hand)
-        goal = path[1]
+        paths = [grasp_path(ctx, T_needle, g.T_tip_needle) for g in grasps]
+        goal = paths[0][1]
         if self.arm_name is not None:
             if self.arm_name not in ctx.arms:
                 raise SkillFailure(f"pick up: no arm named {self.arm_name!r}")
-            arm = ctx.arm(self.arm_name)
-            why = feasible(arm, path)
-            if why:
-                raise SkillFailure(f"needle out of {arm.name}'s reach: {why}")
-            return arm, goal
-        arms = sorted(
-            ctx.arms.values(),
-            key=lambda a: (not a.calibrated, np.linalg.norm(a.base_frame()[:3, 3] - goal[:3, 3])),
-        )
-        reasons = []
+            arms = [ctx.arm(self.arm_name)]
+        else:
+            arms = sorted(
+                ctx.arms.values(),
+                key=lambda a: (
+                    not a.calibrated,
+                    np.linalg.norm(a.base_frame()[:3, 3] - goal[:3, 3]),
+                ),
+            )
+        reasons = {}
         for arm in arms:
-            why = feasible(arm, path)
-            if not why:
-                return arm, goal
-            reasons.append(f"{arm.name}: {why}")
-        raise SkillFailure(f"needle out of every arm's reach: {'; '.join(reasons)}")
+            whys = []
+            for g, path in zip(grasps, paths, strict=True):
+                why = feasible(arm, path)
+                if not why:
+                    return arm, g, path[1]
+                whys.append(why if len(grasps) == 1 else f"{g.hand} hand: {why}")
+            reasons[arm.name] = "; ".join(whys)
+        if self.arm_name is not None:
+            raise SkillFailure(f"needle out of {self.arm_name}'s reach: {reasons[self.arm_name]}")
+        said = "; ".join(f"{n}: {r}" for n, r in reasons.items())
+        raise SkillFailure(f"needle out of every arm's reach: {said}")
 
     def _blade_depth_mm(self, goal: np.ndarray) -> float:
         """How far the blade ends go below the (flat) tissue top at the grasp (mm, + = below)."""

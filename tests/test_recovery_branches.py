@@ -330,20 +330,38 @@ def test_a_drifted_psm2_is_seen_off_its_pinch_point_and_recalibrated(session):
     assert passed(session), session.scores()[0].failure
 
 
-def test_a_needle_on_its_edge_is_refused_and_one_turned_over_is_taken_from_above():
+def test_a_needle_turned_over_is_taken_from_above_and_one_on_its_edge_from_the_side():
     from suture_bt.geometry import NeedleModel, PhantomModel
+    from suture_bt.geometry.tissue_surface import height_above_tissue
     from suture_bt.skills.base import SkillFailure
-    from suture_bt.skills.dropped import pick_up_path
+    from suture_bt.skills.dropped import pick_up_paths
+    from suture_bt.skills.resting_grasp import SIDE_CLEARANCE, resting_grasps
 
     ctx = SimpleNamespace(phantom=PhantomModel(), needle=NeedleModel())
     flat = _pose(np.eye(4), ON_TISSUE)
-    assert len(pick_up_path(ctx, flat, 2.8)) == 3
-    hover, grasp, lift = pick_up_path(ctx, flat @ _rot_x(np.pi), 2.8)  # turned over
+    assert [len(p) for p in pick_up_paths(ctx, flat, 2.8)] == [3]
+    [(hover, grasp, lift)] = pick_up_paths(ctx, flat @ _rot_x(np.pi), 2.8)  # turned over
     down = -PhantomModel().T_world_phantom[:3, 2]
     assert grasp[:3, 2] @ down > np.cos(np.deg2rad(1.0))  # jaws straight down, as for flat
     assert np.linalg.norm(grasp[:3, 3] - hover[:3, 3]) > 0.005
-    with pytest.raises(SkillFailure, match="standing on its edge"):
-        pick_up_path(ctx, flat @ _rot_x(np.deg2rad(80.0)), 2.8)
+    # Seen in a mild campaign trial: dropped on the way to entry 3, it came to rest upright,
+    # arched over the ridge (tip on the tissue before the entry, base on the exit flank).
+    arch = np.array(
+        [[-0.7319, -0.6814, 0.0053, -0.0012], [0.0032, 0.0044, 1.0, 0.0],
+         [-0.6815, 0.7319, -0.001, 0.0691], [0.0, 0.0, 0.0, 1.0]]
+    )  # fmt: skip
+    arch[:3, :3] = np.linalg.svd(arch[:3, :3])[0] @ np.linalg.svd(arch[:3, :3])[2]
+    grasps = resting_grasps(ctx, arch, 2.6)
+    assert {g.hand for g in grasps} == {"driving, from the side", "turned over, from the side"}
+    for g in grasps:
+        jaw = (arch @ np.linalg.inv(g.T_tip_needle))[:3, :3]
+        assert abs(jaw[:, 2] @ down) < np.sin(np.deg2rad(10.0))  # jaws come in level
+        wire = arch @ np.r_[ctx.needle.point_at(g.arc_angle), 1.0]
+        assert height_above_tissue(ctx.phantom, wire[None, :3])[0] >= SIDE_CLEARANCE
+    with pytest.raises(SkillFailure, match="no side grasp clear of the tissue"):
+        sunk = arch.copy()
+        sunk[:3, 3] -= 0.006 * PhantomModel().T_world_phantom[:3, 2]  # sunk into the ridge
+        pick_up_paths(ctx, sunk, 2.6)
 
 
 def test_a_needle_in_a_port_is_caught_and_one_on_the_tissue_beyond_the_ridge_is_not():
@@ -359,6 +377,13 @@ def test_a_needle_in_a_port_is_caught_and_one_on_the_tissue_beyond_the_ridge_is_
     # level with pair 2 (entry 2's axis, continued through the ridge, passes under it).
     beyond = _pose(_rot_x(np.pi), (0.0174, 0.0224, 0.0712))
     assert caught_in_tissue(ctx, beyond) == ""
+    # Arched over the ridge near entry 3 (below entry 3's flank plane near the crest, but
+    # above the exit flank there: outside the ridge) is lying on it, not caught.
+    arch = np.array(
+        [[-0.7319, -0.6814, 0.0053, -0.0012], [0.0032, 0.0044, 1.0, 0.0],
+         [-0.6815, 0.7319, -0.001, 0.0691], [0.0, 0.0, 0.0, 1.0]]
+    )  # fmt: skip
+    assert caught_in_tissue(ctx, arch) == ""
 
 
 @pytest.mark.parametrize("phi_deg", [0.0, 40.0, 90.0])

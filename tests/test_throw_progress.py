@@ -128,7 +128,7 @@ def test_grasp_reaches_says_when_the_held_needle_cannot_be_brought_to_the_approa
     from suture_bt.geometry import NeedleModel, PhantomModel
     from suture_bt.planning import plan_needle_arc
     from suture_bt.skills.grasps import hand, insertion_grasp_angle
-    from suture_bt.skills.pick_up import turned_over_hand
+    from suture_bt.skills.resting_grasp import turned_over_hand
 
     phantom, needle = PhantomModel(), NeedleModel()
     angle = insertion_grasp_angle(plan_needle_arc(*phantom.pair(1), needle))
