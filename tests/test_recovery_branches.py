@@ -229,6 +229,34 @@ def test_needle_dropped_out_of_both_arms_reach_fails_the_throw_saying_so(session
     assert "out of both arms' reach" in result["throws"][0]["tree_reason"]
 
 
+#: A mild campaign trial's needle, dropped on its way to entry 3, came to rest upright and
+#: arched over the ridge (tip on the tissue before the entry, base on the exit flank); here the
+#: same pose in the phantom frame, moved along the ridge to pair 1.
+ARCH_AT_PAIR_1 = np.array(
+    [[-0.72156, -0.69234, -0.00428, -0.00344], [-0.00743, 0.00157, 0.99997, 0.0439],
+     [-0.69231, 0.72157, -0.00628, 0.06936], [0.0, 0.0, 0.0, 1.0]]
+)  # fmt: skip
+
+
+@pytest.mark.slow
+def test_needle_dropped_arched_over_the_ridge_is_picked_up_from_the_side(session):
+    assert session.run_until(running(session, CHECK_1, "bringing the needle")) is not None
+    session.world.faults.drop("psm2")
+    u, _, vt = np.linalg.svd(ARCH_AT_PAIR_1[:3, :3])
+    arch = ARCH_AT_PAIR_1.copy()
+    arch[:3, :3] = u @ vt  # the printed rotation, made orthonormal again
+    session.world.needle.set_pose(arch)  # test API: where the dropped needle lands
+    throw = finish(session)
+    reports = session.context.reports
+    found = [r for r in reports if r["skill"] == "find dropped needle"]
+    assert [r["status"] for r in found] == ["SUCCESS"], found[0].get("failure")
+    picked = [r for r in reports if r["behaviour"] == "PSM2 picks the dropped needle up"]
+    assert [r["status"] for r in picked] == ["SUCCESS"]
+    assert picked[0]["hand"].endswith("from the side") and picked[0]["needle_tilt_deg"] > 60.0
+    assert throw["status"] == "SUCCESS", throw["reason"]
+    assert passed(session), session.scores()[0].failure
+
+
 #: Where the needle dropped while approaching entry 1 came to rest (flat, z up): in view and
 #: in PSM2's reach.
 ON_TISSUE = (-0.0172, 0.0052, 0.0717)
