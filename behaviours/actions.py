@@ -21,6 +21,7 @@ from suture_bt.skills.localize_needle import LocalizeNeedle
 from suture_bt.skills.pick_up import PickUp
 from suture_bt.skills.recover import BackOut, OpenAndBackOff
 from suture_bt.skills.stand_by import StandBy
+from suture_bt.skills.take_hanging import TakeHanging
 
 #: Chooses the taker's arc angle when a handover starts (the belief is known only then).
 AngleRule = Callable[[TaskContext], float]
@@ -145,6 +146,18 @@ class FindDroppedNeedle(SkillBehaviour):
 
     def make_skill(self):
         return FindDropped(self.context, self.picker, self.angle(self.context), self.pair)
+
+
+class TakeHangingNeedle(SkillBehaviour):
+    """Recovery after a drop part way through a pair: ``arm`` takes the needle again where
+    the tissue holds it, at ``angle(context)`` (the insertion then drives it on)."""
+
+    def __init__(self, arm: str, pair: int, angle: AngleRule, name: str | None = None):
+        super().__init__(name or f"{arm.upper()} takes the needle hanging in pair {pair}")
+        self.arm, self.pair, self.angle = arm, pair, angle
+
+    def make_skill(self):
+        return TakeHanging(self.context, self.arm, self.pair, self.angle(self.context))
 
 
 class LayDownNeedle(SkillBehaviour):

@@ -11,7 +11,7 @@ from py_trees.common import Status
 
 from suture_bt.behaviours.skill_behaviour import needs
 from suture_bt.skills.checks import JAW_CLOSED_MAX, jaw_holds_wire
-from suture_bt.skills.dropped import dropped_by, hanging_in_pair
+from suture_bt.skills.dropped import driven_in_pair, dropped_by, hanging_in_pair
 from suture_bt.skills.reach import pair_reach
 
 
@@ -72,6 +72,23 @@ class NeedleHangingInPair(_Condition):
             return False, "no estimate of a free needle"
         why_not = hanging_in_pair(self.context, b.T_world_needle, self.pair)
         return not why_not, why_not or f"on pair {self.pair}'s circle, its tip out"
+
+
+class NeedleDrivenInPair(_Condition):
+    """The free needle's estimate lies on pair ``pair``'s circle, its tip past the entry but
+    not yet out far enough for the puller: dropped while being inserted, the inserting arm
+    can take it again and drive it on."""
+
+    def __init__(self, pair: int, name: str | None = None):
+        super().__init__(name or f"Needle part way through pair {pair}?")
+        self.pair = pair
+
+    def ask(self) -> tuple[bool, str]:
+        b = self.context.belief
+        if b is None or b.holder is not None:
+            return False, "no estimate of a free needle"
+        why_not = driven_in_pair(self.context, b.T_world_needle, self.pair)
+        return not why_not, why_not or f"on pair {self.pair}'s circle, part way through"
 
 
 class NeedleLocalised(_Condition):

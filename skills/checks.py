@@ -23,6 +23,8 @@ MIN_TIP_OUT = 0.005
 #: An image estimate agrees with the pose predicted from the arm within these (m, deg).
 AGREE_POSITION = 0.003
 AGREE_ANGLE_DEG = 12.0
+#: A needle this close to a planned circle's pose at its own sweep angle (m, deg) lies on it.
+ON_ARC_M, ON_ARC_DEG = 0.003, 15.0
 
 
 def jaw_holds_wire(jaw_angle: float) -> tuple[bool, str]:
@@ -100,3 +102,17 @@ def clear_of_tissue(
     ok = bool(np.all(above_top & above_flank))
     worst = float(np.min(local[:, 2] - TISSUE_TOP_Z))
     return ok, f"lowest point of the seen needle {worst * 1e3:+.1f} mm from the tissue top"
+
+
+def on_planned_circle(arc, T_world_needle: np.ndarray, pair: int) -> tuple[str, float]:
+    """('' or why not, the sweep angle) of a needle pose on a pair's planned circle ``arc``
+    (a :class:`~suture_bt.planning.NeedleArc`): its orientation says how far along the
+    circle it is; there it must lie within ``ON_ARC_M`` / ``ON_ARC_DEG`` of the circle."""
+    phi, turn = arc.sweep_angle_of(T_world_needle[:3, :3])
+    off = float(np.linalg.norm(T_world_needle[:3, 3] - arc.needle_pose(phi)[:3, 3]))
+    if off > ON_ARC_M or np.rad2deg(turn) > ON_ARC_DEG:
+        return (
+            f"not on pair {pair}'s circle ({1e3 * off:.1f} mm, {np.rad2deg(turn):.0f}° off; "
+            f"≤ {1e3 * ON_ARC_M:g} mm, {ON_ARC_DEG:g}°)"
+        ), phi
+    return "", phi

@@ -6,7 +6,9 @@ transform is gone), the arm that dropped it opens its jaw and rises, both arms l
 cameras' sight lines to where the needle most likely fell (straight below), the needle is given
 a moment to come to rest, and it is localised from images where it lies. Then, from that
 estimate alone, it says whether a pick-up can work: a needle caught in the tissue (hanging in
-a port: part of its arc inside the phantom's known tissue solid near a port), one on its edge
+a port: part of its arc inside the phantom's known tissue solid near a port) that is not on
+the throw's own circle (in the throw through a pair, a needle on that pair's circle is taken
+again where it hangs: by the puller when its tip is out, else by the inserter), one on its edge
 with no side grasp clear of the tissue, or one out of the picking arm's reach fails the skill
 with a reason that starts "needle dropped by <arm> and ...", so the throw ends saying why. A
 needle lying turned over, or standing on its edge, is taken as the pick-up takes it
@@ -24,20 +26,26 @@ from suture_bt.geometry.phantom import TISSUE_TOP_Z
 from suture_bt.geometry.tissue_surface import height_above_tissue
 from suture_bt.skills import checks
 from suture_bt.skills.base import Skill, SkillFailure, Waiting
-from suture_bt.skills.context import NeedleBelief, TaskContext
+from suture_bt.skills.context import (
+    NeedleBelief,
+    NeedleNotSeen,
+    NeedleObservation,
+    TaskContext,
+)
 from suture_bt.skills.line_of_sight import clear_tip_pose
 from suture_bt.skills.localize_needle import LocalizeNeedle
 from suture_bt.skills.motion import feasible, jaw_to, move_to, together, wait
 from suture_bt.skills.recover import JAW_OPEN
 from suture_bt.skills.resting_grasp import grasp_path, resting_grasps
+from suture_bt.skills.tip_reading import read_hanging
 from suture_bt.transforms import invert
 
 #: The fallen needle is given this long to come to rest before it is looked at (s); the arm
 #: that dropped it rises this far from the tissue first (m).
 SETTLE_S, RISE = 0.3, 0.010
-#: A needle hanging in the tissue that lies this close to the pair's planned circle (mm, deg)
+#: A needle hanging in the tissue on the pair's planned circle (``checks.on_planned_circle``)
 #: with its tip this far out past the exit (mm) is taken again by the extraction.
-ON_ARC_MM, ON_ARC_DEG, MIN_TIP_OUT_MM = 3.0, 15.0, 4.0
+MIN_TIP_OUT_MM = 4.0
 #: A seen needle with a point this far inside the phantom's known tissue solid (flat top and
 #: ridge, :mod:`~suture_bt.geometry.tissue_surface`; vertical depth) is caught in the tissue:
 #: hanging in a port when such a point lies within ``PORT_RADIUS`` of it (a ball: a port's
@@ -77,24 +85,40 @@ def caught_in_tissue(context: TaskContext, T_world_needle: np.ndarray) -> str:
     return ""
 
 
+def on_pair_circle(context: TaskContext, T_world_needle: np.ndarray, pair: int):
+    """(why not, the sweep angle) of a needle pose on pair ``pair``'s planned circle
+    (:func:`~suture_bt.skills.checks.on_planned_circle`; a pair with no circle: why)."""
+    try:
+        arc = context.plan(pair, f"pair {pair}")
+    except SkillFailure as e:
+        return e.reason, 0.0
+    return checks.on_planned_circle(arc, T_world_needle, pair)
+
+
 def hanging_in_pair(context: TaskContext, T_world_needle: np.ndarray, pair: int) -> str:
     """'' when the needle lies on pair ``pair``'s planned circle with its tip out past the
     exit far enough for the puller's grasp (dropped during the pull: the extraction can take
     it again where it hangs); else why not."""
-    try:
-        arc = context.plan(pair, f"pair {pair}")
-    except SkillFailure as e:
-        return e.reason
-    phi, turn = arc.sweep_angle_of(T_world_needle[:3, :3])
-    off = float(np.linalg.norm(T_world_needle[:3, 3] - arc.needle_pose(phi)[:3, 3]))
-    if off > ON_ARC_MM * 1e-3 or np.rad2deg(turn) > ON_ARC_DEG:
-        return (
-            f"not on pair {pair}'s circle ({1e3 * off:.1f} mm, {np.rad2deg(turn):.0f}° off; "
-            f"≤ {ON_ARC_MM:g} mm, {ON_ARC_DEG:g}°)"
-        )
-    out = 1e3 * arc.tip_height_above_exit(phi)
+    why_not, phi = on_pair_circle(context, T_world_needle, pair)
+    if why_not:
+        return why_not
+    out = 1e3 * context.plan(pair, f"pair {pair}").tip_height_above_exit(phi)
     if out < MIN_TIP_OUT_MM:
         return f"its tip only {out:.1f} mm out past exit {pair} (< {MIN_TIP_OUT_MM:g} mm)"
+    return ""
+
+
+def driven_in_pair(context: TaskContext, T_world_needle: np.ndarray, pair: int) -> str:
+    """'' when the needle lies on pair ``pair``'s planned circle past the entry but short of
+    the puller's grasp past the exit (dropped during the insertion: the inserting arm can take
+    it again where it hangs and drive it on); else why not."""
+    why_not, phi = on_pair_circle(context, T_world_needle, pair)
+    if why_not:
+        return why_not
+    if phi <= 0.0:
+        return f"its tip not yet in entry {pair} (sweep {np.rad2deg(phi):.0f}°)"
+    if not hanging_in_pair(context, T_world_needle, pair):
+        return f"its tip out past exit {pair} far enough for the puller"
     return ""
 
 
@@ -112,8 +136,9 @@ def pick_up_paths(context: TaskContext, T_world_needle: np.ndarray, arc_angle: f
 class FindDropped(Skill):
     """The needle fell from its holder: let go, localise it where it lies, and check that
     ``picker`` can take it at ``arc_angle`` (rad) (the other arms' reach is reported), or,
-    in the throw through ``pair``, that it hangs on that pair's circle with its tip out (the
-    extraction takes it again)."""
+    in the throw through ``pair``, that it hangs on that pair's circle: with its tip out (the
+    extraction takes it again), or part way through (the inserting arm takes it again and
+    drives it on)."""
 
     name = "find dropped needle"
 
@@ -142,7 +167,7 @@ class FindDropped(Skill):
         yield from wait(ctx.clock, SETTLE_S)
         self.say(f"looking for the needle dropped by {arm}")
         try:
-            yield from self.run(LocalizeNeedle(ctx, None))
+            yield from self._look(T_last)
         except SkillFailure as e:
             raise SkillFailure(f"needle dropped by {arm} and not found: {e.reason}") from None
         T = ctx.belief.T_world_needle.copy()
@@ -152,6 +177,10 @@ class FindDropped(Skill):
             if not why_not:
                 self.report.update(hanging_in_pair=self.pair, T_world_needle=T.tolist())
                 self.say(f"needle dropped by {arm} {where}, on pair {self.pair}'s circle")
+                return
+            if not driven_in_pair(ctx, T, self.pair):
+                self.report.update(driven_in_pair=self.pair, T_world_needle=T.tolist())
+                self.say(f"needle dropped by {arm} {where}, part way along pair {self.pair}")
                 return
             where = f"{where}, {why_not}"
         if where:
@@ -177,6 +206,38 @@ class FindDropped(Skill):
         at = np.round(1e3 * T[:3, 3], 1)
         self.report["T_world_needle"] = T.tolist()
         self.say(f"needle dropped by {arm} lies on the tissue at {at} mm, in {self.picker}'s reach")
+
+    def _look(self, T_last: np.ndarray | None) -> Waiting:
+        """Localise the fallen needle. Dropped while held at a known pose, it is first looked
+        for there (a look checked against that pose, else that frame read along the circle it
+        was held on, :func:`~suture_bt.skills.tip_reading.read_hanging`): the tissue holds a
+        needle dropped part way through a pair where it was, partly hidden in the ridge, where
+        an unprimed look may refuse it. A needle not seen there (it fell) is looked for
+        anywhere."""
+        ctx = self.context
+        if T_last is not None:
+            try:
+                obs = ctx.sensor.observe(T_last, prior_checked=True)
+                ok, detail = checks.poses_agree(obs.T_world_needle, T_last)
+            except NeedleNotSeen as e:
+                ok, detail = False, e.reason
+            self.report["where_it_was"] = detail if ok else f"not there: {detail}"
+            if ok:
+                ctx.believe(obs, None)
+                return
+            reading = read_hanging(ctx.sensor, ctx.needle, ctx.phantom, T_last)
+            if reading is not None and caught_in_tissue(ctx, reading.T_world_needle):
+                self.report["where_it_was"] = (
+                    f"hanging there: read {reading.turn_deg:+.0f}° along the circle it was held "
+                    f"on ({100 * reading.on:.0f} % of the open circle explained)"
+                )
+                seen = NeedleObservation(
+                    reading.T_world_needle, ctx.sensor.last_frame.stamp, 0.0, 0.0, "image-read"
+                )
+                ctx.believe(seen, None)
+                return
+            yield
+        yield from self.run(LocalizeNeedle(ctx, None))
 
     def _landing_guess(self, p: np.ndarray) -> np.ndarray:
         """Where a needle falling from ``p`` (world) lands first: straight down on the tissue

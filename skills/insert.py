@@ -12,7 +12,9 @@ out would re-enter the tissue at the exit).
 
 Started again with the needle already at the end of its sweep (a retry after the emerged tip
 was not confirmed), it only looks again, after a short back-off; ``confirm_only`` asks for
-that look and fails when the needle is not there.
+that look and fails when the needle is not there. Started with the needle held part way
+along the circle (taken again where it hung after a drop, :mod:`take_hanging`), it sweeps on
+from there along the needle's own circle and confirms.
 """
 
 from __future__ import annotations
@@ -104,6 +106,10 @@ class Insert(Skill):
             yield from self._confirm(arm, exit_)
             return
         self.report["T_tip_needle"] = np.asarray(T_gn, dtype=float).tolist()  # sweep's grasp
+        phi = self._part_way(arc, ctx.predicted_needle())
+        if phi is not None:
+            yield from self._drive_on_from(arm, phi, exit_)
+            return
         T_inv = np.linalg.inv(T_gn)
         lift, pre = (T @ T_inv for T in arc.approach_poses(PRE_ARC, LIFT))
         path = approach_path(ctx, arm, lift)
@@ -120,6 +126,27 @@ class Insert(Skill):
             arc.insertion(start_angle=arc.pre_insertion_angle(PRE_ARC), **SWEEP), T_gn
         )
         yield from follow_poses(ctx.clock, arm, sweep, f"{where}: drive the needle")
+        yield from self._confirm(arm, exit_)
+
+    def _part_way(self, arc, T_now: np.ndarray) -> float | None:
+        """The sweep angle of a needle held on the planned circle with its tip past the entry
+        and short of the sweep's end (taken again where it hung after a drop), else None."""
+        why_not, phi = checks.on_planned_circle(arc, T_now, self.pair)
+        return None if why_not or not 0.0 < phi < arc.insert_end_angle else float(phi)
+
+    def _drive_on_from(self, arm, phi: float, exit_) -> Waiting:
+        """Sweep a needle taken again part way on about its own centre (it runs in its own
+        track) to the planned end, and confirm the emerged tip."""
+        ctx = self.context
+        arc, T_gn = self.arc, ctx.belief.T_tip_needle
+        self.report["resumed_from_deg"] = float(np.rad2deg(phi))
+        self.say(
+            f"pair {self.pair}: needle part way through, driving it on from {np.rad2deg(phi):.0f}°"
+        )
+        T_seen = ctx.predicted_needle()
+        on = arc.insertion(start_angle=phi, **SWEEP)
+        on = gripper_poses(on.transformed(T_left=T_seen @ invert(arc.needle_pose(phi))), T_gn)
+        yield from follow_poses(ctx.clock, arm, on, f"pair {self.pair}: drive the needle on")
         yield from self._confirm(arm, exit_)
 
     @staticmethod

@@ -102,7 +102,7 @@ def _side_angle(ctx, T_world_needle: np.ndarray, make, asked: float):
     angles = np.linspace(needle.tip_angle + END_MARGIN, needle.base_angle - END_MARGIN, 61)
     best = (-np.inf, 0.0)
     for a in sorted(angles, key=lambda c: abs(c - asked)):
-        wire, blades = _jaw_heights(ctx, T_world_needle, make(needle, a))
+        wire, blades = jaw_heights(ctx, T_world_needle, make(needle, a))
         if wire >= SIDE_CLEARANCE and blades >= BLADE_CLEARANCE:
             return float(a), ""
         best = max(best, (min(wire, blades), a))
@@ -112,7 +112,7 @@ def _side_angle(ctx, T_world_needle: np.ndarray, make, asked: float):
     )
 
 
-def _jaw_heights(ctx, T_world_needle: np.ndarray, T_tip_needle: np.ndarray):
+def jaw_heights(ctx, T_world_needle: np.ndarray, T_tip_needle: np.ndarray):
     """Lowest height above the tissue of the held wire point, and of the blades' region swept
     from the hover to the grasp (m)."""
     goal = tip_goal(T_world_needle, T_tip_needle)

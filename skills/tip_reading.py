@@ -8,6 +8,13 @@ the jaw's pinch point by up to ``PIVOT_DEG``. A hypothesis *reads* when the fram
 along its emerged piece and none along its circle continued past its tip. Of the readings on
 the predicted circle the least advanced is taken (it also puts the jaws nearest the entry);
 pivoted hypotheses are tried only when none on the circle reads, the smallest pivot first.
+
+A needle the tissue holds part way through a pair (dropped there) is read the same way
+(:func:`read_hanging`): turned along the circle it was held on, the part of its arc above the
+tissue (the phantom's known surface) must show metal and the circle continued past either end,
+where above the tissue, must not; the turn whose arc explains most of what the open circle
+shows is taken (the middle of the best when several explain it equally: ``on`` is that
+share).
 """
 
 from __future__ import annotations
@@ -17,7 +24,8 @@ from dataclasses import dataclass
 import numpy as np
 from scipy.spatial.transform import Rotation
 
-from suture_bt.geometry import NeedleModel, Port
+from suture_bt.geometry import NeedleModel, PhantomModel, Port
+from suture_bt.geometry.tissue_surface import height_above_tissue
 from suture_bt.skills import checks
 from suture_bt.skills.context import NeedleNotSeen, NeedleSensor
 from suture_bt.transforms import make_transform, rpy_to_matrix
@@ -32,6 +40,13 @@ BEYOND_DEG = (3.0, 15.0)
 MIN_ON, MAX_OFF = 0.75, 0.25
 #: Grid step (deg) of the centre-line samples asked of the frame.
 STEP_DEG = 0.5
+#: A hanging needle's arc counts as in the open this far above the tissue surface (m); at
+#: least ``MIN_OPEN_DEG`` of it must be, for a reading. Turns tried (± deg); the frame shows
+#: metal about ``END_SEEN_DEG`` past each end of the arc (measured on three drops part way
+#: through pair 1: the hit test's pixel tolerance and the wire's round ends); the share of the
+#: open circle whose seen / not seen a reading must explain.
+OPEN_ABOVE, MIN_OPEN_DEG = 0.001, 20.0
+HANG_SCAN_DEG, END_SEEN_DEG, MIN_AGREE = 45.0, 6.0, 0.9
 
 
 @dataclass(frozen=True)
@@ -117,3 +132,37 @@ def _along_circle(sensor: NeedleSensor, needle: NeedleModel, base: np.ndarray, e
         if on >= MIN_ON and off <= MAX_OFF:
             return T, float(np.rad2deg(turn)), on, off
     return None
+
+
+def read_hanging(
+    sensor: NeedleSensor, needle: NeedleModel, phantom: PhantomModel, predicted: np.ndarray
+) -> TipReading | None:
+    """The turn along ``predicted``'s circle that the sensor's last frame supports for a
+    needle partly in the tissue (see the module docstring), or None when none reads."""
+    step = np.deg2rad(STEP_DEG)
+    margin = np.deg2rad(HANG_SCAN_DEG + END_SEEN_DEG + BEYOND_DEG[1])
+    grid = np.arange(needle.tip_angle - margin, needle.base_angle + margin + step / 2, step)
+    try:
+        seen = np.minimum(*sensor.hits(predicted, grid))
+    except NeedleNotSeen:
+        return None
+    pts = needle.point_at(grid) @ predicted[:3, :3].T + predicted[:3, 3]
+    open_ = height_above_tissue(phantom, pts) > OPEN_ABOVE
+    if not open_.any():
+        return None
+    ends = np.deg2rad(END_SEEN_DEG)
+    turns = np.deg2rad(np.arange(-HANG_SCAN_DEG, HANG_SCAN_DEG + 0.01, STEP_DEG))
+    scores = np.full(len(turns), -1.0)
+    for k, turn in enumerate(turns):
+        # advanced by ``turn`` along the sweep: its arc lies at base angles shifted by −turn
+        arc = (grid >= needle.tip_angle - turn - ends) & (grid <= needle.base_angle - turn + ends)
+        visible = arc & open_
+        if visible.sum() * STEP_DEG < MIN_OPEN_DEG or seen[visible].mean() < MIN_ON:
+            continue
+        scores[k] = float((seen[open_] == arc[open_]).mean())
+    if scores.max() < MIN_AGREE:
+        return None
+    best = turns[scores >= scores.max() - 1e-9]
+    turn = float(0.5 * (best.min() + best.max()))
+    T = predicted @ make_transform(rpy_to_matrix((0.0, 0.0, -turn)))
+    return TipReading(T, float(np.rad2deg(turn)), 0.0, float(scores.max()), 0.0)

@@ -144,6 +144,43 @@ def test_needle_dropped_before_the_insertion_is_picked_up_and_the_throw_resumed(
 
 
 @pytest.mark.slow
+def test_needle_dropped_part_way_through_the_insertion_is_taken_again_and_driven_on(session):
+    # 1.2 s into the sweep through pair 1 the jaw loses the needle: the tissue holds it, its
+    # tip not yet out past the exit (the unprimed look refuses a needle mostly in the ridge).
+    insert = node(session, "Insert pair 1")
+    driving = lambda s: (
+        insert.status == Status.RUNNING
+        and "driving the needle"
+        in (  # noqa: E731
+            insert.feedback_message or ""
+        )
+    )
+    assert session.run_until(driving) is not None
+    session.step(60)
+    session.world.faults.drop("psm2")
+    assert GroundTruth(session.world).needle_holders() == []
+    throw = finish(session)
+    reports = session.context.reports
+    found = next(r for r in reports if r["skill"] == "find dropped needle")
+    assert found["status"] == "SUCCESS" and found["driven_in_pair"] == 1
+    assert found["where_it_was"].startswith("hanging there: read")
+    done = [(r["behaviour"], r["status"]) for r in reports if r["t_start"] >= found["t_start"]]
+    assert done[:4] == [
+        ("Find the dropped needle", "SUCCESS"),
+        ("PSM2 takes the needle hanging in pair 1", "SUCCESS"),
+        ("Drive the dropped needle on through pair 1", "SUCCESS"),
+        ("Pull the re-driven needle through pair 1", "SUCCESS"),
+    ]
+    driven = next(r for r in reports if r["behaviour"].startswith("Drive the dropped"))
+    assert 0.0 < driven["resumed_from_deg"] < driven["arc"]["insert_end_angle_deg"]
+    assert node(session, "Unless pair 1 is pulled through").feedback_message.startswith(
+        "skipped: pair 1 pulled through"
+    )
+    assert throw["status"] == "SUCCESS", throw["reason"]
+    assert passed(session), session.scores()[0].failure
+
+
+@pytest.mark.slow
 def test_needle_dropped_on_its_way_to_the_tissue_is_found_and_picked_up(session):
     # PSM2 (uncalibrated) carries the start needle to where it would lay it down; before any
     # estimate names a holder the jaw loses it (the watch knows the holder from the start's
@@ -508,3 +545,20 @@ def test_a_needle_hanging_on_its_pairs_circle_with_the_tip_out_can_be_taken_agai
     assert hanging_in_pair(ctx, slid, 3).startswith("not on pair 3's circle")
     early = arc.needle_pose(0.3)  # tip barely in: nothing out past the exit to take
     assert "out past exit 3" in hanging_in_pair(ctx, early, 3)
+
+
+def test_a_needle_dropped_part_way_through_its_pair_can_be_driven_on():
+    from suture_bt.geometry import NeedleModel, PhantomModel
+    from suture_bt.planning import plan_needle_arc
+    from suture_bt.skills.context import TaskContext
+    from suture_bt.skills.dropped import driven_in_pair
+
+    phantom, needle = PhantomModel(), NeedleModel()
+    ctx = SimpleNamespace(phantom=phantom, needle=needle)
+    ctx.plan = lambda pair, where: TaskContext.plan(ctx, pair, where)
+    arc = plan_needle_arc(*phantom.pair(3), needle)
+    assert driven_in_pair(ctx, arc.needle_pose(0.3), 3) == ""  # tip in the ridge
+    assert driven_in_pair(ctx, arc.needle_pose(0.3), 1).startswith("not on pair 1's circle")
+    assert "not yet in entry 3" in driven_in_pair(ctx, arc.needle_pose(-0.2), 3)
+    pulled = arc.needle_pose(arc.insert_end_angle + 0.2)
+    assert "far enough for the puller" in driven_in_pair(ctx, pulled, 3)

@@ -80,3 +80,43 @@ def test_no_metal_or_metal_everywhere_is_no_reading():
 
 def test_a_needle_still_under_the_surface_is_no_reading():
     assert reading(along(PLANNED, -40.0)) is None
+
+
+class HangingFrameOf:
+    """A frame showing metal where a needle held by the tissue is in the open: along its
+    centre-line above the phantom's surface, overshooting each end by ``overshoot_deg`` (as
+    measured in the simulation's frames)."""
+
+    def __init__(self, T_true: np.ndarray | None, overshoot_deg: float = 6.0):
+        self.T_true, self.over = T_true, np.deg2rad(overshoot_deg)
+
+    def hits(self, T_world_needle, angles):
+        from suture_bt.geometry.tissue_surface import height_above_tissue
+
+        angles = np.asarray(angles)
+        if self.T_true is None:
+            return np.zeros(len(angles), bool), np.zeros(len(angles), bool)
+        pts = NEEDLE.point_at(angles) @ T_world_needle[:3, :3].T + T_world_needle[:3, 3]
+        a = np.linspace(NEEDLE.tip_angle - self.over, NEEDLE.base_angle + self.over, 600)
+        true = NEEDLE.point_at(a) @ self.T_true[:3, :3].T + self.T_true[:3, 3]
+        on = np.min(np.linalg.norm(pts[:, None] - true[None], axis=2), axis=1) < 3e-4
+        h = on & (height_above_tissue(PhantomModel(), pts) > 0.0)
+        return h, h.copy()
+
+
+@pytest.mark.parametrize("phi_deg, lag_deg", [(30.0, 3.0), (60.0, -8.0), (90.0, 20.0)])
+def test_a_needle_held_by_the_tissue_is_read_along_the_circle_it_was_held_on(phi_deg, lag_deg):
+    from suture_bt.skills.tip_reading import read_hanging
+
+    true = ARC.needle_pose(np.deg2rad(phi_deg))  # dropped part way through pair 2
+    predicted = along(true, lag_deg)  # the arm swept on (or less far) before it knew
+    r = read_hanging(HangingFrameOf(true), NEEDLE, PhantomModel(), predicted)
+    assert r is not None and r.turn_deg == pytest.approx(-lag_deg, abs=2.5)  # back to it
+    assert np.linalg.norm(r.T_world_needle[:3, 3] - true[:3, 3]) < 1e-6  # same centre
+
+
+def test_no_needle_where_it_was_held_is_no_hanging_reading():
+    from suture_bt.skills.tip_reading import read_hanging
+
+    gone = read_hanging(HangingFrameOf(None), NEEDLE, PhantomModel(), PLANNED)
+    assert gone is None  # it fell: nothing in the open along its circle

@@ -20,8 +20,10 @@ confirmed is looked at again (a needle at the end of its sweep is then only conf
 backed out along its arc, re-localised and inserted once more. A watch
 beside every throw's steps fails the attempt when the holder's jaw closes below the wire
 ("needle dropped by psm2"); the needle is then found where it fell and picked up by PSM2 at
-the grasp the pairs still to do need, and the throw's steps run again without redoing what
-is done. A needle that cannot be picked up fails the throw saying why.
+the grasp the pairs still to do need (from the side when it stands on its edge), or, held by
+the tissue on the pair's circle, taken again where it hangs (tip out: PSM1 pulls it through;
+part way: PSM2 drives it on and PSM1 pulls it through), and the throw's steps run again
+without redoing what is done. A needle that cannot be taken fails the throw saying why.
 """
 
 from __future__ import annotations
@@ -45,6 +47,7 @@ from suture_bt.behaviours.actions import (
     OpenAndBackOffArm,
     PickUpNeedle,
     StandByAtExit,
+    TakeHangingNeedle,
     away_from_holder_and,
     grasp_for_pairs,
 )
@@ -53,6 +56,7 @@ from suture_bt.behaviours.conditions import (
     GraspMissed,
     JawEmpty,
     JawHoldsSomething,
+    NeedleDrivenInPair,
     NeedleDropped,
     NeedleHangingInPair,
     NeedleLocalised,
@@ -403,9 +407,10 @@ def regrasp(
 
 def picked_up_again(pair: int, later_pairs: tuple[int, ...]) -> py_trees.behaviour.Behaviour:
     """After a drop: let go, find the needle where it fell, and PSM2 picks it up at the grasp
-    the pairs still to do need, or, hanging on this pair's circle with its tip out (dropped
-    while pulled), PSM1 takes it again and pulls it through (fails saying why when it cannot:
-    elsewhere in the tissue, on its edge, out of reach, not found)."""
+    the pairs still to do need; or, hanging on this pair's circle, it is taken again where it
+    hangs: with its tip out (dropped while pulled) PSM1 pulls it through; part way (dropped
+    while inserted) PSM2 drives it on and PSM1 pulls it through. Fails saying why when none
+    can: elsewhere in the tissue, on its edge with no side grasp, out of reach, not found."""
     grasp = grasp_for_remaining(pair, later_pairs)
     re_take = py_trees.composites.Sequence(
         f"PSM1 takes it again in pair {pair}",
@@ -417,6 +422,18 @@ def picked_up_again(pair: int, later_pairs: tuple[int, ...]) -> py_trees.behavio
             ),
         ],
     )
+    drive_on = py_trees.composites.Sequence(
+        f"PSM2 takes it again part way through pair {pair}",
+        memory=True,
+        children=[
+            NeedleDrivenInPair(pair),
+            TakeHangingNeedle(INSERTER, pair, grasp),
+            InsertNeedle(INSERTER, pair, f"Drive the dropped needle on through pair {pair}"),
+            ExtractNeedle(
+                PULLER, INSERTER, pair, name=f"Pull the re-driven needle through pair {pair}"
+            ),
+        ],
+    )
     return py_trees.composites.Sequence(
         f"Pick up the needle dropped in pair {pair}",
         memory=True,
@@ -424,10 +441,11 @@ def picked_up_again(pair: int, later_pairs: tuple[int, ...]) -> py_trees.behavio
             NeedleDropped(),
             FindDroppedNeedle(INSERTER, grasp, pair),
             py_trees.composites.Selector(
-                f"Hanging in pair {pair}: pull it through, else pick it up",
+                f"Hanging in pair {pair}: take it again there, else pick it up",
                 memory=True,
                 children=[
                     re_take,
+                    drive_on,
                     PickUpNeedle(INSERTER, grasp, name="PSM2 picks the dropped needle up"),
                 ],
             ),
