@@ -17,6 +17,13 @@ from __future__ import annotations
 
 import numpy as np
 
+from suture_bt.calibration.calibration_pose import (
+    CALIBRATION_JAW,
+    CALIBRATION_POSES,
+    actual_joints,
+    offset_box_points,
+)
+from suture_bt.calibration.jaw_keypoints import project_keypoints
 from suture_bt.geometry.phantom import TISSUE_TOP_Z, TISSUE_X, TISSUE_Y
 from suture_bt.geometry.tissue_surface import height_above_tissue, surface_height
 from suture_bt.kinematics import UnreachablePoseError, inverse_kinematics
@@ -51,6 +58,21 @@ SETTLE_S = 0.4
 #: their pick-up in reach (how it lies about the vertical depends on the unknown grasp).
 PICK_YAWS = np.deg2rad(np.arange(0.0, 360.0, 30.0))
 PICK_SHARE = 0.75
+#: The needle's possible places stay this far (px at 1080 rows) in the left image from the
+#: laying arm's jaw keypoints at its calibration pose, wherever the offset bound may put them:
+#: the arm calibrates next, and a needle under a keypoint takes it (a campaign trial: a jaw
+#: tip found on the wire 10 px off, calibration 0.9° off, the pick-up closed empty).
+JAW_VIEW_MARGIN_PX = 40.0
+
+
+def calibration_jaw_pixels(ctx: TaskContext, arm: ArmHandle) -> np.ndarray:
+    """Left-image pixels (N×2) of ``arm``'s jaw keypoints at its calibration pose over the
+    offset bound box (none for an arm with no calibration pose)."""
+    if arm.name not in CALIBRATION_POSES:
+        return np.zeros((0, 2))
+    q = actual_joints(CALIBRATION_POSES[arm.name], offset_box_points(3))
+    px = project_keypoints(q, CALIBRATION_JAW, arm.base_frame(), ctx.camera.model.left)
+    return px.reshape(-1, 2)
 
 
 def _spot_frames(ctx: TaskContext) -> list[np.ndarray]:
@@ -143,7 +165,8 @@ class LayDown(Skill):
         """The spot where the needle most surely lands flat on the tissue in view: the share of
         its possible places (a circle two radii round the spot, either side of the jaw, moved
         by the tip displacements the arm's offsets may still cause) that lie on the flat top
-        (not the ridge, not off the block) and in both images; ties nearest the image centre.
+        (not the ridge, not off the block), in both images and not under the arm's
+        calibration jaw in the left image (``JAW_VIEW_MARGIN_PX``); ties nearest the centre.
         Its release pose must be reachable, and the pick-up from at least ``PICK_SHARE`` of
         the needle's orientations."""
         ctx = self.context
@@ -151,6 +174,8 @@ class LayDown(Skill):
         cam = ctx.camera.model.left
         centre = np.array([cam.width / 2.0, cam.height / 2.0])
         ring = 2.0 * ctx.needle.point_at(np.linspace(0.0, 2 * np.pi, 12, endpoint=False))
+        jaw_px = calibration_jaw_pixels(ctx, arm)
+        margin = JAW_VIEW_MARGIN_PX * cam.height / 1080.0
         ranked, reasons = [], []
         for T_spot in _spot_frames(ctx):
             T_release = release_pose(ctx, arm, T_spot)
@@ -161,10 +186,16 @@ class LayDown(Skill):
             moved = presentation.displacements(arm, q)
             places = ring @ T_spot[:3, :3].T + T_spot[:3, 3]
             places = (places[:, None, :] + moved[None]).reshape(-1, 3)
-            share = float(np.mean(landing_ok(ctx, places)))
+            good = landing_ok(ctx, places)
+            if len(jaw_px):
+                px = cam.project(places)
+                gap = np.min(np.linalg.norm(px[:, None] - jaw_px[None], axis=2), axis=1)
+                good &= gap >= margin
+            share = float(np.mean(good))
             if share < MIN_LANDING_SHARE:
                 reasons.append(
-                    f"too little of where it may land is flat tissue in view ({share:.0%})"
+                    f"too little of where it may land is flat tissue in view, clear of "
+                    f"{arm.name}'s calibration jaw ({share:.0%})"
                 )
                 continue
             picks = [grasp_path(ctx, _turned(T_spot, yaw), T_hand) for yaw in PICK_YAWS]

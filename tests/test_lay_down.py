@@ -52,3 +52,21 @@ def test_an_arm_that_reaches_no_spot_fails_saying_why(monkeypatch):
     monkeypatch.setattr(lay_down, "SPOTS_X", (0.5,))  # half a metre off: in no view
     with pytest.raises(SkillFailure, match="no spot on the tissue where psm2 can lay"):
         LayDown(ctx, "psm2", np.deg2rad(150.0))._choose_spot(arm)
+
+
+def test_the_spot_keeps_the_needle_from_under_the_arms_calibration_jaw(monkeypatch):
+    from suture_bt.skills import lay_down
+    from suture_bt.skills.base import SkillFailure
+
+    ctx, arm = make_ctx(), make_arm("psm2")
+    jaw = lay_down.calibration_jaw_pixels(ctx, arm)
+    assert len(jaw) == 27 * 4  # 4 keypoints over the offset box
+    T_spot, _ = LayDown(ctx, "psm2", np.deg2rad(150.0))._choose_spot(arm)
+    spot_px = ctx.camera.model.left.project(T_spot[:3, 3][None])
+    gap = np.min(np.linalg.norm(jaw - spot_px, axis=1))
+    assert gap > 2 * lay_down.JAW_VIEW_MARGIN_PX
+    # Beside the entry side of the ridge, level with pair 3: in the image, under the jaw.
+    monkeypatch.setattr(lay_down, "SPOTS_X", (-0.017,))
+    monkeypatch.setattr(lay_down, "SPOTS_Y", (0.0,))
+    with pytest.raises(SkillFailure, match="clear of psm2's calibration jaw"):
+        LayDown(ctx, "psm2", np.deg2rad(150.0))._choose_spot(arm)

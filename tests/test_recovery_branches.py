@@ -147,15 +147,7 @@ def test_needle_dropped_before_the_insertion_is_picked_up_and_the_throw_resumed(
 def test_needle_dropped_part_way_through_the_insertion_is_taken_again_and_driven_on(session):
     # 1.2 s into the sweep through pair 1 the jaw loses the needle: the tissue holds it, its
     # tip not yet out past the exit (the unprimed look refuses a needle mostly in the ridge).
-    insert = node(session, "Insert pair 1")
-    driving = lambda s: (
-        insert.status == Status.RUNNING
-        and "driving the needle"
-        in (  # noqa: E731
-            insert.feedback_message or ""
-        )
-    )
-    assert session.run_until(driving) is not None
+    assert session.run_until(running(session, "Insert pair 1", "driving the needle"))
     session.step(60)
     session.world.faults.drop("psm2")
     assert GroundTruth(session.world).needle_holders() == []
