@@ -174,8 +174,9 @@ class Insert(Skill):
                     raise NeedleNotSeen(f"answer disagrees with the arm: {detail}")
             except NeedleNotSeen as e:
                 reasons.append(e.reason)
-                pinch = arm.tip_world()[:3, :3] @ JAW_POINT_IN_TIP + arm.tip_world()[:3, 3]
-                reading = read_tip(ctx.sensor, ctx.needle, predicted, exit_, pinch)
+                T_jaw = arm.tip_world()
+                jaw = (T_jaw[:3, :3] @ JAW_POINT_IN_TIP + T_jaw[:3, 3], T_jaw[:3, 1])
+                reading = read_tip(ctx.sensor, ctx.needle, predicted, exit_, jaw)
                 if reading is None:
                     reasons.append("no emerged tip read near the predicted pose")
                     yield

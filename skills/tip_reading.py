@@ -3,11 +3,14 @@
 When the localiser refuses a needle that is mostly inside the tissue, the frame still shows its
 emerged piece. The hypotheses are poses near the prediction: turned along the needle's own
 circle (the in-hand estimate's least certain part is where along the arc the jaw holds it) and,
-for a needle that slipped in the jaw on contact with the tissue, also turned in its plane about
-the jaw's pinch point by up to ``PIVOT_DEG``. A hypothesis *reads* when the frame shows metal
-along its emerged piece and none along its circle continued past its tip. Of the readings on
-the predicted circle the least advanced is taken (it also puts the jaws nearest the entry);
-pivoted hypotheses are tried only when none on the circle reads, the smallest pivot first.
+for a needle that slipped in the jaw on contact with the tissue, also turned about the jaw's
+closing axis (normal to the blade faces) through its pinch point by up to ``PIVOT_DEG``: the
+way a wire pinched between flat blades turns, which tilts the needle's plane. A hypothesis
+*reads* when the frame shows metal along its emerged piece and none along its circle continued
+past its tip. Of the readings on the predicted circle the least advanced is taken (it also puts
+the jaws nearest the entry); pivoted hypotheses are tried only when none on the circle reads,
+and of theirs the best supported is taken (the smallest pivot among equals: over a wide range
+of pivots a small one may read a short, partly seen piece).
 
 A needle the tissue holds part way through a pair (dropped there) is read the same way
 (:func:`read_hanging`): turned along the circle it was held on, the part of its arc above the
@@ -30,9 +33,11 @@ from suture_bt.skills import checks
 from suture_bt.skills.context import NeedleNotSeen, NeedleSensor
 from suture_bt.transforms import make_transform, rpy_to_matrix
 
-#: Turns along the circle tried (deg, + = further in) and pivots about the pinch point (deg).
+#: Turns along the circle tried (deg, + = further in) and pivots about the pinch point (deg,
+#: smallest first: up to two slips of the mild profile's 5°, one slip before the insertion's
+#: contact and one on it; a campaign trial's needle turned 7.7° and was not read at ±6°).
 SCAN_DEG = 30.0
-PIVOT_DEG = (1.5, -1.5, 3.0, -3.0, 4.5, -4.5, 6.0, -6.0)
+PIVOT_DEG = tuple(sign * 1.5 * k for k in range(1, 8) for sign in (1.0, -1.0))
 #: The circle past a reading's tip (deg of arc beyond it) must show no metal.
 BEYOND_DEG = (3.0, 15.0)
 #: Shares of the emerged piece that must be seen as metal, and of the piece past the tip
@@ -61,7 +66,7 @@ class TipReading:
     off: float
 
     def describe(self) -> str:
-        pivot = f", turned {self.pivot_deg:+.1f}° about the jaw" if self.pivot_deg else ""
+        pivot = f", turned {self.pivot_deg:+.1f}° in the jaw" if self.pivot_deg else ""
         return (
             f"tip read {self.turn_deg:+.0f}° along the arc from the in-hand estimate{pivot}: "
             f"{100 * self.on:.0f} % of its emerged piece seen, {100 * self.off:.0f} % past it"
@@ -74,9 +79,11 @@ def tip_out(T_world_needle: np.ndarray, needle: NeedleModel, exit_: Port) -> flo
     return 1e-3 * numbers.get("tip_out_mm", 0.0)
 
 
-def pivoted(T_world_needle: np.ndarray, pinch: np.ndarray, deg: float) -> np.ndarray:
-    """The needle turned ``deg`` in its own plane about the world point ``pinch``."""
-    R = Rotation.from_rotvec(np.deg2rad(deg) * T_world_needle[:3, 2]).as_matrix()
+def pivoted(
+    T_world_needle: np.ndarray, pinch: np.ndarray, deg: float, axis: np.ndarray
+) -> np.ndarray:
+    """The needle turned ``deg`` about the world ``axis`` (unit) through the point ``pinch``."""
+    R = Rotation.from_rotvec(np.deg2rad(deg) * np.asarray(axis, dtype=float)).as_matrix()
     T = np.array(T_world_needle, dtype=float)
     T[:3, :3] = R @ T[:3, :3]
     T[:3, 3] = pinch + R @ (T[:3, 3] - pinch)
@@ -88,26 +95,33 @@ def read_tip(
     needle: NeedleModel,
     predicted: np.ndarray,
     exit_: Port,
-    pinch: np.ndarray | None = None,
+    jaw: tuple[np.ndarray, np.ndarray] | None = None,
 ) -> TipReading | None:
     """The reading of the sensor's last frame (see the module docstring); None when no
-    hypothesis reads (no emerged tip in the frame, or no frame). Without ``pinch`` only the
-    predicted circle is tried."""
-    pivots = (0.0,) + (PIVOT_DEG if pinch is not None else ())
-    for pivot in pivots:
-        base = predicted if pivot == 0.0 else pivoted(predicted, pinch, pivot)
-        try:
-            found = _along_circle(sensor, needle, base, exit_)
-        except NeedleNotSeen:
-            return None
-        if found is not None:
+    hypothesis reads (no emerged tip in the frame, or no frame). ``jaw``: the holder's pinch
+    point and closing axis (world); without it only the predicted circle is tried."""
+    try:
+        found = _along_circle(sensor, needle, predicted, exit_)
+    except NeedleNotSeen:
+        return None
+    if found is not None:
+        T, turn, on, off = found
+        return TipReading(T, turn, 0.0, on, off)
+    best = None
+    for pivot in PIVOT_DEG if jaw is not None else ():
+        T_pivot = pivoted(predicted, jaw[0], pivot, jaw[1])
+        found = _along_circle(sensor, needle, T_pivot, exit_, best=True)
+        if found is not None and (best is None or found[2] - found[3] > best[3] - best[4]):
             T, turn, on, off = found
-            return TipReading(T, turn, pivot, on, off)
-    return None
+            best = (T, turn, pivot, on, off)
+    return None if best is None else TipReading(*best)
 
 
-def _along_circle(sensor: NeedleSensor, needle: NeedleModel, base: np.ndarray, exit_: Port):
-    """(pose, turn deg, on, off) of the least advanced turn of ``base`` that reads, or None."""
+def _along_circle(
+    sensor: NeedleSensor, needle: NeedleModel, base: np.ndarray, exit_: Port, best: bool = False
+):
+    """(pose, turn deg, on, off) of the least advanced turn of ``base`` that reads (``best``:
+    the best supported, the least advanced among equals), or None."""
     step = np.deg2rad(STEP_DEG)
     grid = needle.tip_angle + np.arange(
         np.deg2rad(-SCAN_DEG - BEYOND_DEG[1]), np.deg2rad(SCAN_DEG + 90.0), step
@@ -118,6 +132,7 @@ def _along_circle(sensor: NeedleSensor, needle: NeedleModel, base: np.ndarray, e
         i = np.clip(np.rint((angles - grid[0]) / step).astype(int), 0, len(grid) - 1)
         return min(float(left[i].mean()), float(right[i].mean()))
 
+    found = None
     for turn in np.deg2rad(np.arange(-SCAN_DEG, SCAN_DEG + 0.01, 1.0)):
         # advanced by ``turn`` along the sweep (which turns the needle about its own −z)
         T = base @ make_transform(rpy_to_matrix((0.0, 0.0, -turn)))
@@ -130,8 +145,11 @@ def _along_circle(sensor: NeedleSensor, needle: NeedleModel, base: np.ndarray, e
         beyond = needle.tip_angle - turn - np.deg2rad(np.linspace(*BEYOND_DEG, 8))
         on, off = share(emerged), share(beyond)
         if on >= MIN_ON and off <= MAX_OFF:
-            return T, float(np.rad2deg(turn)), on, off
-    return None
+            if not best:
+                return T, float(np.rad2deg(turn)), on, off
+            if found is None or on - off > found[2] - found[3]:
+                found = (T, float(np.rad2deg(turn)), on, off)
+    return found
 
 
 def read_hanging(
