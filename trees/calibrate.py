@@ -5,7 +5,7 @@ from __future__ import annotations
 import py_trees
 
 from suture_bt.trees.multi_throw import PAIRS
-from suture_bt.trees.subtrees import prepare
+from suture_bt.trees.prepare import prepare
 
 
 def create_tree(policy: str = "stop") -> py_trees.behaviour.Behaviour:

@@ -9,7 +9,9 @@ from __future__ import annotations
 import py_trees
 
 from suture_bt.behaviours.report import SutureReport
-from suture_bt.trees.subtrees import in_reach, prepare, throw
+from suture_bt.trees.prepare import prepare
+from suture_bt.trees.subtrees import in_reach
+from suture_bt.trees.throw import throw
 
 PAIRS = (1, 2, 3, 4)
 
