@@ -27,6 +27,9 @@ NEEDLE_RGBA = (1.0, 1.0, 1.0, 1.0)
 NEEDLE_SPECULAR = (0.9, 0.9, 0.9)
 #: Force limit of the grasp/tissue constraints (N): far above the needle's weight.
 HOLD_FORCE = 50.0
+#: A released needle overlapping the tissue by at most this (m; the wire's radius plus the
+#: contact margin and some) is lifted out of it rather than left to pass through.
+LIFT_OUT = 0.001
 
 
 def _check_pose(T, what: str = "needle pose") -> np.ndarray:
@@ -216,11 +219,15 @@ class NeedleBody:
         self._tissue_enabled = enable
 
     def _penetrates_tissue(self) -> bool:
+        return self._penetration() > 1e-5
+
+    def _penetration(self) -> float:
+        """Deepest overlap (m) of the needle's collision shape with a tissue body (0: none)."""
+        deepest = 0.0
         for b in self._tissue:
-            pts = p.getClosestPoints(self.id, b, 0.0, physicsClientId=self.client)
-            if any(c[8] < -1e-5 for c in pts):
-                return True
-        return False
+            for c in p.getClosestPoints(self.id, b, 0.0, physicsClientId=self.client):
+                deepest = max(deepest, -float(c[8]))
+        return deepest
 
     def update(self) -> None:
         """Call after every physics step: a held needle is snapped exactly onto its holder (the
@@ -233,13 +240,25 @@ class NeedleBody:
             self._pending_tissue = False
 
     def _release_collisions(self) -> None:
-        """After a release: collide with tissue again now, or once the needle is clear of it."""
+        """After a release: collide with tissue again now. A needle whose collision shape only
+        overlaps the tissue (by at most ``LIFT_OUT``: released against it, not stuck in it) is
+        first lifted straight up out of the overlap, as the tissue would push it; with its
+        contacts off it would fall through the tissue (a campaign trial's dropped needle ended
+        under the phantom and was scored a stab). One deeper in gets its contacts back once it
+        is clear of the tissue."""
         self._set_tissue_collision(True)
-        if self._penetrates_tissue():
-            self._set_tissue_collision(False)
-            self._pending_tissue = True
-        else:
-            self._pending_tissue = False
+        for _ in range(4):
+            depth = self._penetration()
+            if depth <= 1e-5:
+                self._pending_tissue = False
+                return
+            if depth > LIFT_OUT:
+                break
+            T = self.pose()
+            T[2, 3] += 1.5 * depth + 1e-4  # a 46° flank needs about 1.44× the overlap
+            self.set_pose(T)
+        self._set_tissue_collision(False)
+        self._pending_tissue = True
 
     # --- constraints ------------------------------------------------------------------------
     def _remove_constraint(self) -> None:

@@ -299,11 +299,12 @@ class World:
             other = self.needle_holders.pop()
             self._attach(other, invert(self._true_tip_pose(other)) @ self.needle.pose())
         else:
-            self.needle.detach()
-            self._wake_needle()
             T = self.needle.pose()
             if self.phantom.inserted(T):
                 self.needle.freeze(T)  # the tissue holds an inserted needle that is released
+            else:
+                self.needle.detach()
+                self._wake_needle()
 
     # ------------------------------------------------------------------ time
     def add_periodic(self, period: float, callback: Callable[[float], None]) -> object:

@@ -33,8 +33,8 @@ from suture_bt.skills.context import (
     TaskContext,
 )
 from suture_bt.skills.line_of_sight import clear_tip_pose
-from suture_bt.skills.localize_needle import LocalizeNeedle
 from suture_bt.skills.motion import feasible, jaw_to, move_to, together, wait
+from suture_bt.skills.pick_up import look_for_resting
 from suture_bt.skills.recover import JAW_OPEN
 from suture_bt.skills.resting_grasp import grasp_path, resting_grasps
 from suture_bt.skills.tip_reading import read_hanging
@@ -213,7 +213,7 @@ class FindDropped(Skill):
         was held on, :func:`~suture_bt.skills.tip_reading.read_hanging`): the tissue holds a
         needle dropped part way through a pair where it was, partly hidden in the ridge, where
         an unprimed look may refuse it. A needle not seen there (it fell) is looked for
-        anywhere."""
+        anywhere (and once more after the arms make way, as the pick-up looks)."""
         ctx = self.context
         if T_last is not None:
             try:
@@ -237,7 +237,7 @@ class FindDropped(Skill):
                 ctx.believe(seen, None)
                 return
             yield
-        yield from self.run(LocalizeNeedle(ctx, None))
+        yield from look_for_resting(self)
 
     def _landing_guess(self, p: np.ndarray) -> np.ndarray:
         """Where a needle falling from ``p`` (world) lands first: straight down on the tissue

@@ -75,18 +75,7 @@ class PickUp(Skill):
             self.say("the arms make way for the cameras")
             yield from together(*make_way(ctx, np.asarray(ctx.needle_hint, dtype=float)))
         self.say("looking for the needle")
-        try:
-            yield from self.run(LocalizeNeedle(ctx, None))
-        except SkillFailure as first:
-            # An arm may hide it from one eye: where the other eye saw needle, on the tissue
-            # top, is where the arms make way before one more look.
-            seen = seen_on_tissue(ctx)
-            if seen is None:
-                raise
-            self.report["first_look"] = first.reason
-            self.say("not seen clearly: the arms make way and it is looked at again")
-            yield from together(*make_way(ctx, seen))
-            yield from self.run(LocalizeNeedle(ctx, None))
+        yield from look_for_resting(self)
         ctx.needle_hint = None
         T_needle = ctx.belief.T_world_needle.copy()
 
@@ -193,6 +182,23 @@ class PickUp(Skill):
         blade_end = goal[:3, :3] @ np.array([0.0, 0.0, BLADE_BEYOND_TIP]) + goal[:3, 3]
         height = (invert(T_ph) @ np.r_[blade_end, 1.0])[2] - TISSUE_TOP_Z
         return float(-1e3 * height)
+
+
+def look_for_resting(skill: Skill) -> Waiting:
+    """Localise a free needle for ``skill``; refused, look once more after the arms make way
+    for where an eye saw needle on the tissue top (an arm may hide it from one eye). The
+    first refusal is in ``skill.report["first_look"]``; a second refusal fails the skill."""
+    ctx = skill.context
+    try:
+        yield from skill.run(LocalizeNeedle(ctx, None))
+    except SkillFailure as first:
+        seen = seen_on_tissue(ctx)
+        if seen is None:
+            raise
+        skill.report["first_look"] = first.reason
+        skill.say("not seen clearly: the arms make way and it is looked at again")
+        yield from together(*make_way(ctx, seen))
+        yield from skill.run(LocalizeNeedle(ctx, None))
 
 
 def seen_on_tissue(ctx: TaskContext) -> np.ndarray | None:

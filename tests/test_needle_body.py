@@ -131,3 +131,19 @@ def test_released_inserted_needle_stays_frozen(client):
     step(client, 300)
     # It falls through the tissue (collisions stay off while inside) onto the floor below.
     assert needle.pose()[2, 3] < T[2, 3] - 0.005
+
+
+def test_needle_released_against_the_tissue_is_lifted_out_not_let_through(client):
+    # Held flat with its wire 0.3 mm into the tissue top (not stuck: its centre-line is above
+    # the surface), then let go: it rests on the tissue instead of falling through it.
+    phantom = PhantomBody(client, PhantomModel())
+    T = make_transform(np.eye(3), (-0.03, 0.0, TISSUE_TOP_Z + MODEL.wire_radius - 0.0003))
+    assert not phantom.inserted(T)
+    arm = holder(client)
+    needle = NeedleBody(client, MODEL, T, tissue_ids=(phantom.id,))
+    needle.attach(arm, 0, np.linalg.inv(link_pose(client, arm, 0)) @ T)
+    step(client, 10)
+    needle.detach()
+    step(client, 500)
+    assert needle.state == "free" and needle.is_resting()
+    assert abs(needle.pose()[2, 3] - T[2, 3]) < 0.001  # on the tissue top, not under it
