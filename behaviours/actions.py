@@ -9,10 +9,16 @@ from collections.abc import Callable
 from suture_bt.behaviours.skill_behaviour import SkillBehaviour
 from suture_bt.planning import NeedleArcError, plan_needle_arc
 from suture_bt.skills.calibrate_arm import CalibrateArm
+from suture_bt.skills.checks import last_seen_at_exit
 from suture_bt.skills.context import TaskContext
 from suture_bt.skills.dropped import FindDropped
 from suture_bt.skills.extract import Extract
-from suture_bt.skills.grasps import free_angle, held_arc_angle, insertion_grasp_angle
+from suture_bt.skills.grasps import (
+    END_MARGIN,
+    free_angle,
+    held_arc_angle,
+    insertion_grasp_angle,
+)
 from suture_bt.skills.handover import Handover
 from suture_bt.skills.in_hand_check import CheckInHand
 from suture_bt.skills.insert import Insert
@@ -21,7 +27,7 @@ from suture_bt.skills.localize_needle import LocalizeNeedle
 from suture_bt.skills.pick_up import PickUp
 from suture_bt.skills.recover import BackOut, OpenAndBackOff
 from suture_bt.skills.stand_by import StandBy
-from suture_bt.skills.take_hanging import TakeHanging
+from suture_bt.skills.take_hanging import LetGoInTissue, TakeHanging
 
 #: Chooses the taker's arc angle when a handover starts (the belief is known only then).
 AngleRule = Callable[[TaskContext], float]
@@ -160,6 +166,18 @@ class TakeHangingNeedle(SkillBehaviour):
         return TakeHanging(self.context, self.arm, self.pair, self.angle(self.context))
 
 
+class LetGoOfNeedleInTissue(SkillBehaviour):
+    """``arm`` lets go of the needle it holds part way through pair ``pair`` and backs off
+    (the tissue holds it), to take it again elsewhere."""
+
+    def __init__(self, arm: str, pair: int, name: str | None = None):
+        super().__init__(name or f"{arm.upper()} lets go in pair {pair}")
+        self.arm, self.pair = arm, pair
+
+    def make_skill(self):
+        return LetGoInTissue(self.context, self.arm, self.pair)
+
+
 class LayDownNeedle(SkillBehaviour):
     """Empty ``arm``'s jaw for its calibration: lay the needle on the tissue where ``arm`` can
     pick it up again at ``angle(context)``, and let go."""
@@ -188,6 +206,12 @@ def grasp_for_pairs(pairs: tuple[int, ...]) -> AngleRule:
         return max(angles) if angles else ctx.needle.base_angle - 0.2
 
     return rule
+
+
+def furthest_back(ctx: TaskContext) -> float:
+    """The grasp nearest the needle's base that keeps the end margin: the most room for the
+    tip to be driven on."""
+    return float(ctx.needle.base_angle - END_MARGIN)
 
 
 def away_from_holder_and(later: AngleRule) -> AngleRule:
@@ -227,4 +251,6 @@ class BackOutNeedle(SkillBehaviour):
             if r.get("skill") == "insert" and "T_tip_needle" in r:
                 swept = r["T_tip_needle"]
                 break
-        return BackOut(self.context, self.arm, self.pair, swept)
+        since = self.context.throws.get(self.pair, {}).get("t_start", 0.0)
+        seen = last_seen_at_exit(self.context.reports, self.pair, since)
+        return BackOut(self.context, self.arm, self.pair, swept, seen)

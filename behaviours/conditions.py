@@ -10,7 +10,13 @@ import py_trees
 from py_trees.common import Status
 
 from suture_bt.behaviours.skill_behaviour import needs
-from suture_bt.skills.checks import JAW_CLOSED_MAX, jaw_holds_wire
+from suture_bt.skills.checks import (
+    JAW_CLOSED_MAX,
+    MIN_TIP_OUT,
+    jaw_holds_wire,
+    last_seen_at_exit,
+    seen_out_past_exit,
+)
 from suture_bt.skills.dropped import driven_in_pair, dropped_by, hanging_in_pair
 from suture_bt.skills.reach import pair_reach
 
@@ -89,6 +95,26 @@ class NeedleDrivenInPair(_Condition):
             return False, "no estimate of a free needle"
         why_not = driven_in_pair(self.context, b.T_world_needle, self.pair)
         return not why_not, why_not or f"on pair {self.pair}'s circle, part way through"
+
+
+class TipSeenShort(_Condition):
+    """The latest insertion of pair ``pair`` saw its tip cross the exit within the rule but
+    short of the tip-out rule (its grasp stopped the drive-on): it may be taken further back
+    and driven on, never backed out through the exit."""
+
+    def __init__(self, pair: int, name: str | None = None):
+        super().__init__(name or f"Tip out past exit {pair} but short?")
+        self.pair = pair
+
+    def ask(self) -> tuple[bool, str]:
+        since = self.context.throws.get(self.pair, {}).get("t_start", 0.0)
+        seen = last_seen_at_exit(self.context.reports, self.pair, since)
+        if not seen_out_past_exit(seen):
+            return False, f"no tip seen out past exit {self.pair} in this throw"
+        out = seen["tip_out_mm"]
+        if out >= 1e3 * MIN_TIP_OUT:
+            return False, f"tip seen {out:.1f} mm out: not short"
+        return True, f"tip seen {out:.1f} mm out past exit {self.pair} (< {1e3 * MIN_TIP_OUT:g})"
 
 
 class NeedleLocalised(_Condition):

@@ -116,3 +116,24 @@ def on_planned_circle(arc, T_world_needle: np.ndarray, pair: int) -> tuple[str, 
             f"≤ {1e3 * ON_ARC_M:g} mm, {ON_ARC_DEG:g}°)"
         ), phi
     return "", phi
+
+
+def last_seen_at_exit(reports: list[dict], pair: int, since: float) -> dict | None:
+    """What the latest insertion of ``pair`` (started at or after ``since``) saw at the exit:
+    its report's ``seen`` numbers (``lateral_mm``, ``tip_out_mm``), or None."""
+    for r in reversed(reports):
+        if r.get("t_start", -1.0) < since:
+            break
+        if r.get("skill") == "insert" and r.get("pair") == pair and r.get("seen"):
+            return r["seen"]
+    return None
+
+
+def seen_out_past_exit(seen: dict | None) -> bool:
+    """The tip was seen crossing the exit within the rule's lateral distance and out past it:
+    backing it out would re-enter the tissue there."""
+    return bool(
+        seen
+        and seen.get("lateral_mm", np.inf) <= 1e3 * MAX_LATERAL
+        and seen.get("tip_out_mm", 0.0) > 0.0
+    )

@@ -66,12 +66,14 @@ class NeedleObservation:
 
 class NeedleNotSeen(Exception):
     """The sensor gave no answer; ``reason`` says why (refusal, needle out of view, ...);
-    ``unseen_eye``: an image ("left", "right") in which nothing of a needle was seen."""
+    ``unseen_eye``: an image ("left", "right") in which nothing of a needle was seen;
+    ``best``: the refused best fit (world) when the localiser made one (not an answer)."""
 
-    def __init__(self, reason: str, unseen_eye: str | None = None):
+    def __init__(self, reason: str, unseen_eye: str | None = None, best=None):
         super().__init__(reason)
         self.reason = reason
         self.unseen_eye = unseen_eye
+        self.best = best
 
 
 class NeedleSensor(Protocol):

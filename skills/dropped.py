@@ -209,34 +209,13 @@ class FindDropped(Skill):
 
     def _look(self, T_last: np.ndarray | None) -> Waiting:
         """Localise the fallen needle. Dropped while held at a known pose, it is first looked
-        for there (a look checked against that pose, else that frame read along the circle it
-        was held on, :func:`~suture_bt.skills.tip_reading.read_hanging`): the tissue holds a
-        needle dropped part way through a pair where it was, partly hidden in the ridge, where
-        an unprimed look may refuse it. A needle not seen there (it fell) is looked for
-        anywhere (and once more after the arms make way, as the pick-up looks)."""
-        ctx = self.context
+        for there (:func:`seen_where_it_was`): the tissue holds a needle dropped part way
+        through a pair where it was, partly hidden in the ridge, where an unprimed look may
+        refuse it. A needle not seen there (it fell) is looked for anywhere (and once more
+        after the arms make way, as the pick-up looks)."""
         if T_last is not None:
-            try:
-                obs = ctx.sensor.observe(T_last, prior_checked=True)
-                ok, detail = checks.poses_agree(obs.T_world_needle, T_last)
-            except NeedleNotSeen as e:
-                ok, detail = False, e.reason
-            self.report["where_it_was"] = detail if ok else f"not there: {detail}"
-            if ok:
-                ctx.believe(obs, None)
+            if (yield from seen_where_it_was(self, T_last)):
                 return
-            reading = read_hanging(ctx.sensor, ctx.needle, ctx.phantom, T_last)
-            if reading is not None and caught_in_tissue(ctx, reading.T_world_needle):
-                self.report["where_it_was"] = (
-                    f"hanging there: read {reading.turn_deg:+.0f}° along the circle it was held "
-                    f"on ({100 * reading.on:.0f} % of the open circle explained)"
-                )
-                seen = NeedleObservation(
-                    reading.T_world_needle, ctx.sensor.last_frame.stamp, 0.0, 0.0, "image-read"
-                )
-                ctx.believe(seen, None)
-                return
-            yield
         yield from look_for_resting(self)
 
     def _landing_guess(self, p: np.ndarray) -> np.ndarray:
@@ -267,3 +246,31 @@ def _reach(arm, paths: list[list[np.ndarray]]) -> str:
     """'' when ``arm`` can follow one of ``paths``; else why not (the preferred path's)."""
     whys = [feasible(arm, path) for path in paths]
     return "" if not all(whys) else whys[0]
+
+
+def seen_where_it_was(skill: Skill, T_last: np.ndarray) -> Waiting:
+    """True when a free needle is seen where it was last believed (``T_last``, world), and
+    adopted as the belief: a look checked against that pose, else that frame read along the
+    circle it was on (:func:`~suture_bt.skills.tip_reading.read_hanging`) when the reading
+    lies in the tissue. ``skill.report["where_it_was"]`` says which, or why not."""
+    ctx = skill.context
+    yield
+    try:
+        obs = ctx.sensor.observe(T_last, prior_checked=True)
+        ok, detail = checks.poses_agree(obs.T_world_needle, T_last)
+    except NeedleNotSeen as e:
+        ok, detail = False, e.reason
+    skill.report["where_it_was"] = detail if ok else f"not there: {detail}"
+    if ok:
+        ctx.believe(obs, None)
+        return True
+    reading = read_hanging(ctx.sensor, ctx.needle, ctx.phantom, T_last)
+    if reading is None or not caught_in_tissue(ctx, reading.T_world_needle):
+        return False
+    skill.report["where_it_was"] = (
+        f"hanging there: read {reading.turn_deg:+.0f}° along the circle it was held on "
+        f"({100 * reading.on:.0f} % of the open circle explained)"
+    )
+    stamp = ctx.sensor.last_frame.stamp
+    ctx.believe(NeedleObservation(reading.T_world_needle, stamp, 0.0, 0.0, "image-read"), None)
+    return True

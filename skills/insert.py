@@ -91,12 +91,16 @@ class Insert(Skill):
         except NeedleArcError as e:
             raise SkillFailure(f"{where}: {e.reason}") from None
         self.arc = arc
+        self.report["pair"] = self.pair
         self.report["arc"] = {
             "T_world_needle_entry": arc.T_world_needle_entry.tolist(),
             "port_angle_deg": float(np.rad2deg(arc.port_angle)),
             "insert_end_angle_deg": float(np.rad2deg(arc.insert_end_angle)),
         }
-        at_end = self._at_sweep_end(arm, arc, T_gn)
+        phi = self._part_way(arc, ctx.predicted_needle())
+        at_end = self._at_sweep_end(arm, arc, T_gn) or (
+            phi is not None and phi >= arc.insert_end_angle
+        )
         if at_end or self.confirm_only:
             if not at_end:
                 raise SkillFailure(f"{where}: the needle is not at the end of its sweep")
@@ -106,7 +110,6 @@ class Insert(Skill):
             yield from self._confirm(arm, exit_)
             return
         self.report["T_tip_needle"] = np.asarray(T_gn, dtype=float).tolist()  # sweep's grasp
-        phi = self._part_way(arc, ctx.predicted_needle())
         if phi is not None:
             yield from self._drive_on_from(arm, phi, exit_)
             return
@@ -130,9 +133,10 @@ class Insert(Skill):
 
     def _part_way(self, arc, T_now: np.ndarray) -> float | None:
         """The sweep angle of a needle held on the planned circle with its tip past the entry
-        and short of the sweep's end (taken again where it hung after a drop), else None."""
+        (taken again where it hung after a drop, or further back after a short sweep), else
+        None; at or past the sweep's end it is only looked at (and driven on when short)."""
         why_not, phi = checks.on_planned_circle(arc, T_now, self.pair)
-        return None if why_not or not 0.0 < phi < arc.insert_end_angle else float(phi)
+        return None if why_not or phi <= 0.0 else float(phi)
 
     def _drive_on_from(self, arm, phi: float, exit_) -> Waiting:
         """Sweep a needle taken again part way on about its own centre (it runs in its own

@@ -84,6 +84,8 @@ class VisionNeedleSensor:
         self.localizer = localizer or NeedleLocalizer(camera.model)
         self.last_frame = None
         self.last_estimate = None
+        #: The last look's refused best fit (world), when it made one: not an answer.
+        self.last_refused: np.ndarray | None = None
         self.calls = 0
         #: Bad frames re-captured so far, as (kind, reason) (kind: "lost" or "dark").
         self.bad_frames: list[tuple[str, str]] = []
@@ -102,7 +104,7 @@ class VisionNeedleSensor:
         """Capture and localise (world frame), with the priors the caller's knowledge gives."""
         self.calls += 1
         frame = self.capture()
-        self.last_frame, self.last_estimate = frame, None
+        self.last_frame, self.last_estimate, self.last_refused = frame, None, None
         T_cam_world = self.camera.model.left.T_cam_world
         prev_cam = None if previous is None else T_cam_world @ np.asarray(previous, dtype=float)
         strict_rms = self.localizer.max_rms_px
@@ -118,7 +120,11 @@ class VisionNeedleSensor:
                 ),
             )
         except NeedleNotFound as exc:
-            raise NeedleNotSeen(str(exc), getattr(exc, "unseen_eye", None)) from exc
+            best = getattr(exc, "best", None)
+            if best is not None:
+                best = np.linalg.inv(T_cam_world) @ best
+            self.last_refused = best
+            raise NeedleNotSeen(str(exc), getattr(exc, "unseen_eye", None), best) from exc
         finally:
             self.localizer.max_rms_px = strict_rms
         self.last_estimate = est

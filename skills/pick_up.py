@@ -31,7 +31,7 @@ import numpy as np
 from suture_bt.geometry.phantom import TISSUE_TOP_Z
 from suture_bt.skills import checks
 from suture_bt.skills.base import Skill, SkillFailure, Waiting
-from suture_bt.skills.context import ArmHandle, NeedleObservation, TaskContext
+from suture_bt.skills.context import ArmHandle, NeedleNotSeen, NeedleObservation, TaskContext
 from suture_bt.skills.grasps import backed_off, held_arc_angle
 from suture_bt.skills.line_of_sight import make_way
 from suture_bt.skills.localize_needle import LocalizeNeedle
@@ -42,6 +42,7 @@ from suture_bt.skills.resting_grasp import (
     LIFT,
     RestingGrasp,
     grasp_path,
+    lies_on_tissue,
     resting_grasps,
     resting_tilt,
 )
@@ -186,19 +187,54 @@ class PickUp(Skill):
 
 def look_for_resting(skill: Skill) -> Waiting:
     """Localise a free needle for ``skill``; refused, look once more after the arms make way
-    for where an eye saw needle on the tissue top (an arm may hide it from one eye). The
-    first refusal is in ``skill.report["first_look"]``; a second refusal fails the skill."""
+    for where an eye saw needle on the tissue top (an arm may hide it from one eye). A refusal
+    whose best fit lies flat on the tissue, where a resting needle lies, is checked by a look
+    primed with that fit (:func:`_resting_answer`). The first refusal is in
+    ``skill.report["first_look"]``; a second refusal fails the skill."""
     ctx = skill.context
     try:
         yield from skill.run(LocalizeNeedle(ctx, None))
-    except SkillFailure as first:
-        seen = seen_on_tissue(ctx)
-        if seen is None:
-            raise
-        skill.report["first_look"] = first.reason
-        skill.say("not seen clearly: the arms make way and it is looked at again")
-        yield from together(*make_way(ctx, seen))
+        return
+    except SkillFailure as e:
+        first = e
+    skill.report["first_look"] = first.reason
+    if (yield from _resting_answer(skill)):
+        return
+    seen = seen_on_tissue(ctx)
+    if seen is None:
+        raise first
+    skill.say("not seen clearly: the arms make way and it is looked at again")
+    yield from together(*make_way(ctx, seen))
+    try:
         yield from skill.run(LocalizeNeedle(ctx, None))
+    except SkillFailure as second:
+        if not (yield from _resting_answer(skill)):
+            raise second from None
+
+
+def _resting_answer(skill: Skill) -> Waiting:
+    """True when the last look's refused best fit lies flat on the tissue (``lies_on_tissue``:
+    a free needle comes to rest there) and a look primed with it (the arm-prediction check's
+    looser outline tolerance) agrees with it and lies there too; that answer is adopted."""
+    ctx = skill.context
+    T = getattr(ctx.sensor, "last_refused", None)
+    if T is None or not lies_on_tissue(ctx, T):
+        return False
+    yield
+    try:
+        obs = ctx.sensor.observe(T, prior_checked=True)
+    except NeedleNotSeen as e:
+        skill.report["resting_look"] = f"refused fit lies on the tissue; primed look: {e.reason}"
+        return False
+    ok, detail = checks.poses_agree(obs.T_world_needle, T)
+    ok = ok and lies_on_tissue(ctx, obs.T_world_needle)
+    skill.report["resting_look"] = (
+        f"refused fit lies on the tissue; primed look {'agrees' if ok else 'disagrees'} ({detail})"
+    )
+    if ok:
+        ctx.believe(obs, None)
+        skill.say("a look primed with the refused fit on the tissue agrees: adopted")
+    return ok
 
 
 def seen_on_tissue(ctx: TaskContext) -> np.ndarray | None:

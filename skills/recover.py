@@ -7,7 +7,8 @@
   along the circle it came in on (the planned sweep reversed, from where the needle is now to
   the pre-insertion pose), then lifts it along the entry normal. The needle is rigid in the
   jaw, so reversing the gripper's own motion retraces the needle's path through the tissue
-  whatever the in-hand error was.
+  whatever the in-hand error was. A tip seen out past the exit is never backed out: it would
+  re-enter the tissue there (a campaign trial's was, and scored a stab).
 """
 
 from __future__ import annotations
@@ -15,6 +16,7 @@ from __future__ import annotations
 import numpy as np
 
 from suture_bt.planning import gripper_poses
+from suture_bt.skills import checks
 from suture_bt.skills.base import Skill, SkillFailure, Waiting
 from suture_bt.skills.context import TaskContext
 from suture_bt.skills.grasps import backed_off
@@ -59,18 +61,30 @@ class BackOut(Skill):
     name = "back out"
 
     def __init__(
-        self, context: TaskContext, arm: str, pair: int, T_tip_needle: np.ndarray | None = None
+        self,
+        context: TaskContext,
+        arm: str,
+        pair: int,
+        T_tip_needle: np.ndarray | None = None,
+        seen: dict | None = None,
     ):
         super().__init__(context)
         self.arm_name, self.pair = arm, pair
         self.T_tip_needle = None if T_tip_needle is None else np.asarray(T_tip_needle, float)
+        self.seen = seen
         self.arms = (arm,)
 
     def program(self) -> Waiting:
         ctx = self.context
-        arm = ctx.arm(self.arm_name)
         where = f"pair {self.pair}"
+        if checks.seen_out_past_exit(self.seen):
+            raise SkillFailure(
+                f"{where}: the tip was seen out past exit {self.pair} "
+                f"({self.seen['tip_out_mm']:.1f} mm, crossing {self.seen['lateral_mm']:.1f} mm "
+                "from it): backing out would re-enter the tissue there"
+            )
         b = ctx.held_by(self.arm_name, where)
+        arm = ctx.arm(self.arm_name)
         entry, _ = ctx.phantom.pair(self.pair)
         arc = ctx.plan(self.pair, where)
         T_gn = b.T_tip_needle if self.T_tip_needle is None else self.T_tip_needle

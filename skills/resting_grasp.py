@@ -36,6 +36,8 @@ APPROACH, LIFT = 0.010, 0.015
 #: A side grasp: the wire point stays this high above the tissue surface, and the blades (half
 #: ``BLADE_HALF_SPREAD`` either side of the wire, from the hover to the grasp) this high (m).
 SIDE_CLEARANCE, BLADE_CLEARANCE, BLADE_HALF_SPREAD = 0.002, 0.0005, 0.0012
+#: A pose lies flat on the tissue: plane tilt (rad) and centre-line height range (m).
+FLAT_TILT, ON_SURFACE = np.deg2rad(15.0), (-0.0003, 0.0012)
 
 
 @dataclass(frozen=True)
@@ -62,6 +64,18 @@ def resting_tilt(ctx, T_world_needle: np.ndarray) -> tuple[float, bool]:
     """A resting needle's plane tilt from the tissue (rad) and whether its z points up."""
     z_up = float(T_world_needle[:3, 2] @ ctx.phantom.T_world_phantom[:3, 2])
     return float(np.arccos(min(1.0, abs(z_up)))), z_up >= 0.0
+
+
+def lies_on_tissue(ctx, T_world_needle: np.ndarray) -> bool:
+    """The needle pose lies flat on the tissue as a free needle comes to rest: its plane within
+    ``FLAT_TILT`` of the tissue top and its whole centre-line ``ON_SURFACE`` (m) above the
+    known surface under it (the wire's radius, give or take)."""
+    tilt, _ = resting_tilt(ctx, T_world_needle)
+    if tilt > FLAT_TILT:
+        return False
+    pts = ctx.needle.centerline(40) @ T_world_needle[:3, :3].T + T_world_needle[:3, 3]
+    h = height_above_tissue(ctx.phantom, pts)
+    return bool(np.all((h >= ON_SURFACE[0]) & (h <= ON_SURFACE[1])))
 
 
 def grasp_path(ctx, T_world_needle: np.ndarray, T_tip_needle: np.ndarray) -> list[np.ndarray]:

@@ -1,4 +1,4 @@
-"""Skill: the inserting arm takes again a needle it dropped part way through a pair.
+"""Skills: the inserting arm takes again a needle the tissue holds part way through a pair.
 
 The tissue holds a needle dropped during its insertion: it hangs on the pair's planned circle
 with its tip in the ridge (``FindDropped`` found it there: ``driven_in_pair``). The arm comes
@@ -9,6 +9,10 @@ and the measured jaw must show the wire (an empty close backs off before failing
 estimate that found the needle is anchored to the gripper (the in-hand transform); nothing is
 lifted: the insertion that follows drives the needle on along its own circle from where it
 hangs (:class:`~suture_bt.skills.insert.Insert` resumes part way).
+
+:class:`LetGoInTissue` makes the same state on purpose: an insertion whose tip came out short
+of the rule with its grasp at the planner's limit lets go (the tissue holds the needle) and
+backs off, so the arm can take it again further back and drive it on.
 """
 
 from __future__ import annotations
@@ -18,11 +22,11 @@ import numpy as np
 from suture_bt.planning import NeedleArcError
 from suture_bt.skills import checks
 from suture_bt.skills.base import Skill, SkillFailure, Waiting
-from suture_bt.skills.context import NeedleObservation, TaskContext
-from suture_bt.skills.dropped import driven_in_pair
+from suture_bt.skills.context import NeedleBelief, NeedleObservation, TaskContext
+from suture_bt.skills.dropped import on_pair_circle, seen_where_it_was
 from suture_bt.skills.grasps import END_MARGIN, JAW_CLEARANCE, backed_off, hand, tip_goal
-from suture_bt.skills.motion import FINE, feasible, jaw_to, move_to
-from suture_bt.skills.recover import JAW_OPEN
+from suture_bt.skills.motion import FINE, feasible, jaw_to, let_go, move_to
+from suture_bt.skills.recover import BACK_OFF, JAW_OPEN
 from suture_bt.skills.resting_grasp import APPROACH, jaw_heights
 
 #: The held wire point stays this high above the tissue surface (m): the blades close around
@@ -46,8 +50,9 @@ class TakeHanging(Skill):
         if b is None or b.holder is not None:
             raise SkillFailure(f"{where}: no estimate of a free needle to take")
         T_needle = b.T_world_needle.copy()
-        why = driven_in_pair(ctx, T_needle, self.pair)
-        if why:
+        why, phi = on_pair_circle(ctx, T_needle, self.pair)
+        if why or phi <= 0.0:
+            why = why or f"its tip not yet in entry {self.pair}"
             raise SkillFailure(f"{where}: the needle is not hanging part way through: {why}")
         arm = ctx.arm(self.arm_name)
         angle = self._grasp_angle(T_needle, ctx.plan(self.pair, where))
@@ -93,3 +98,35 @@ class TakeHanging(Skill):
             f"pair {self.pair}: no grasp on the hanging needle leaves the tip room and the jaw "
             f"clear of the tissue ({reasons[0]}; ...; {reasons[-1]})"
         )
+
+
+class LetGoInTissue(Skill):
+    """``arm`` lets go of the needle it holds part way through pair ``pair`` (the tissue holds
+    it) and backs off along its jaws; the belief becomes that needle, free, where it was."""
+
+    name = "let go in tissue"
+
+    def __init__(self, context: TaskContext, arm: str, pair: int):
+        super().__init__(context)
+        self.arm_name, self.pair = arm, pair
+
+    def program(self) -> Waiting:
+        ctx = self.context
+        where = f"pair {self.pair}"
+        b = ctx.held_by(self.arm_name, where)
+        T_needle = ctx.predicted_needle()
+        why, phi = on_pair_circle(ctx, T_needle, self.pair)
+        if why or phi <= 0.0:
+            why = why or f"its tip not yet in entry {self.pair}"
+            raise SkillFailure(f"{where}: not letting go outside the tissue: {why}")
+        arm = ctx.arm(self.arm_name)
+        self.say(f"{where}: {arm.name} lets go; the tissue holds the needle")
+        yield from let_go(arm, JAW_OPEN)
+        ctx.belief = NeedleBelief(
+            T_needle, b.stamp, b.source, None, None, b.angle_std_deg, b.position_std_mm
+        )
+        T_back = backed_off(arm.commanded_tip_world(), BACK_OFF)
+        yield from move_to(ctx.clock, arm, [T_back], "back off the held needle")
+        # Where the tissue holds it, from the images (the arm's kinematics may have drifted).
+        if not (yield from seen_where_it_was(self, T_needle)):
+            self.say(f"{where}: not seen where it was let go; the arm's estimate stands")

@@ -173,6 +173,41 @@ def test_needle_dropped_part_way_through_the_insertion_is_taken_again_and_driven
 
 
 @pytest.mark.slow
+def test_a_tip_short_at_the_grasp_limit_is_taken_further_back_and_driven_on(session):
+    # 0.6 s into the sweep through pair 1 the needle slides 4 mm back in the jaw (past the
+    # mild profile's 1.5 mm): the emerged tip is read 3.9 mm out, short of the rule, and the
+    # grasp leaves no room to drive on. It must not be backed out through the exit.
+    assert session.run_until(running(session, "Insert pair 1", "driving the needle"))
+    session.step(30)
+    session.world.faults.slip("psm2", angle_deg=0.0, slide_mm=4.0)
+    throw = finish(session)
+    done = [(r["behaviour"], r["status"]) for r in session.context.reports]
+    i = done.index(("PSM2 lets go in pair 1", "SUCCESS"))
+    assert done[i - 2 : i + 3] == [
+        ("Insert pair 1", "FAILURE"),
+        ("Look at the tip past exit 1 again", "FAILURE"),
+        ("PSM2 lets go in pair 1", "SUCCESS"),
+        ("PSM2 takes it further back (pair 1)", "SUCCESS"),
+        ("Drive on from further back through pair 1", "SUCCESS"),
+    ]
+    short = next(r for r in session.context.reports if r["behaviour"] == "Insert pair 1")
+    assert 0.0 < short["seen"]["tip_out_mm"] < 5.0
+    assert not any(r["skill"] == "back out" for r in session.context.reports)
+    assert throw["status"] == "SUCCESS", throw["reason"]
+    assert passed(session), session.scores()[0].failure
+
+
+def test_a_tip_seen_out_past_the_exit_is_never_backed_out():
+    from suture_bt.skills.base import SkillFailure
+    from suture_bt.skills.recover import BackOut
+
+    seen = {"lateral_mm": 0.1, "tip_out_mm": 3.5}
+    skill = BackOut(SimpleNamespace(), "psm2", 1, None, seen)
+    with pytest.raises(SkillFailure, match="backing out would re-enter the tissue there"):
+        next(skill.program())
+
+
+@pytest.mark.slow
 def test_needle_dropped_on_its_way_to_the_tissue_is_found_and_picked_up(session):
     # PSM2 (uncalibrated) carries the start needle to where it would lay it down; before any
     # estimate names a holder the jaw loses it (the watch knows the holder from the start's

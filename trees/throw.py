@@ -31,12 +31,14 @@ from suture_bt.behaviours.actions import (
     FindDroppedNeedle,
     HandOver,
     InsertNeedle,
+    LetGoOfNeedleInTissue,
     Localize,
     OpenAndBackOffArm,
     PickUpNeedle,
     StandByAtExit,
     TakeHangingNeedle,
     away_from_holder_and,
+    furthest_back,
     grasp_for_pairs,
 )
 from suture_bt.behaviours.conditions import (
@@ -47,6 +49,7 @@ from suture_bt.behaviours.conditions import (
     NeedleHangingInPair,
     NeedleLocalised,
     NeedleStillHeld,
+    TipSeenShort,
 )
 from suture_bt.behaviours.parallel import ParallelWithReason
 from suture_bt.behaviours.recovery import recovery_idiom
@@ -89,8 +92,22 @@ def insert_while_standing_by(pair: int) -> py_trees.behaviour.Behaviour:
 
 def retried_insertion(pair: int) -> py_trees.behaviour.Behaviour:
     """Insert; when the emerged tip is not confirmed, first look at it again (the frames may
-    have been lost or dark: then the retry only confirms), else back out along the arc,
-    re-localise the needle in PSM2's hand (a fresh in-hand transform) and insert once more."""
+    have been lost or dark: then the retry only confirms); a tip seen out but short with the
+    grasp at its limit is let go (the tissue holds it), taken again further back and driven
+    on; else back out along the arc (never a tip seen out past the exit), re-localise the
+    needle in PSM2's hand (a fresh in-hand transform) and insert once more."""
+    further_back = py_trees.composites.Sequence(
+        f"Take it further back and drive on (pair {pair})",
+        memory=True,
+        children=[
+            TipSeenShort(pair),
+            LetGoOfNeedleInTissue(INSERTER, pair),
+            TakeHangingNeedle(
+                INSERTER, pair, furthest_back, name=f"PSM2 takes it further back (pair {pair})"
+            ),
+            InsertNeedle(INSERTER, pair, f"Drive on from further back through pair {pair}"),
+        ],
+    )
     back_out = py_trees.composites.Sequence(
         f"Back out of pair {pair} and re-localise",
         memory=True,
@@ -105,6 +122,7 @@ def retried_insertion(pair: int) -> py_trees.behaviour.Behaviour:
         memory=True,
         children=[
             InsertNeedle(INSERTER, pair, f"Look at the tip past exit {pair} again", True),
+            further_back,
             back_out,
         ],
     )

@@ -206,9 +206,7 @@ def score_throws(
 def _stab_windows(windows: Mapping[int, Window]) -> dict[int, tuple[float, float]]:
     """Each attempted throw answers for the tissue entries from the end of the throw before it
     (or the run's start) to its own end; the last one also for everything after it."""
-    attempted = sorted(
-        ((float(w[0]), float(w[1]), i) for i, w in windows.items() if w is not None)
-    )
+    attempted = sorted(((float(w[0]), float(w[1]), i) for i, w in windows.items() if w is not None))
     out, previous_end = {}, -np.inf
     for k, (_, end, i) in enumerate(attempted):
         out[i] = (previous_end, np.inf if k == len(attempted) - 1 else end)

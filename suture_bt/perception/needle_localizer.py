@@ -584,7 +584,8 @@ class NeedleLocalizer:
             raise NeedleNotFound(
                 f"the best pose misses the needle's outline by {fit.rms_px:.2f} px RMS "
                 f"(> {self.max_rms_px:.2f}; {100 * fit.inlier_fraction:.0f} % of its edge "
-                "explained): too little of the needle is seen clearly"
+                "explained): too little of the needle is seen clearly",
+                best=fit.T_cam_needle.copy(),
             )
         if fit.inlier_fraction < MIN_INLIER_FRACTION:
             raise NeedleNotFound(
