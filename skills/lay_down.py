@@ -166,7 +166,9 @@ class LayDown(Skill):
         its possible places (a circle two radii round the spot, either side of the jaw, moved
         by the tip displacements the arm's offsets may still cause) that lie on the flat top
         (not the ridge, not off the block), in both images and not under the arm's
-        calibration jaw in the left image (``JAW_VIEW_MARGIN_PX``); ties nearest the centre.
+        calibration jaw in the left image (``JAW_VIEW_MARGIN_PX``), plus (counted once more:
+        a needle off the block is lost, a fresh campaign trial's was) the share on the block;
+        ties nearest the centre.
         Its release pose must be reachable, and the pick-up from at least ``PICK_SHARE`` of
         the needle's orientations."""
         ctx = self.context
@@ -204,10 +206,13 @@ class LayDown(Skill):
                 reasons.append(f"pick-up out of reach ({whys[0]})")
                 continue
             off_centre = float(np.linalg.norm(cam.project(T_spot[:3, 3][None])[0] - centre))
-            ranked.append((-round(share, 2), off_centre, len(ranked), T_spot, T_release))
+            # A needle off the block is lost: its share counts once more in the ranking.
+            kept = float(np.mean(on_block(ctx, places)))
+            rank = -round(share + kept, 2)
+            ranked.append((rank, off_centre, len(ranked), T_spot, T_release, share, kept))
         if ranked:
-            *_, T_spot, T_release = min(ranked, key=lambda r: r[:3])
-            self.report["landing_share"] = -min(ranked, key=lambda r: r[:3])[0]
+            *_, T_spot, T_release, share, kept = min(ranked, key=lambda r: r[:3])
+            self.report.update(landing_share=share, on_block_share=kept)
             return T_spot, T_release
         kinds = {r.split(" (")[0]: r for r in reasons}  # one example of each kind
         raise SkillFailure(
@@ -216,16 +221,20 @@ class LayDown(Skill):
         )
 
 
-def landing_ok(ctx: TaskContext, points: np.ndarray) -> np.ndarray:
-    """Per world point on the tissue top: on the flat block (not the ridge, not past its
-    edges, ``EDGE_MARGIN`` inside) and inside both images."""
+def on_block(ctx: TaskContext, points: np.ndarray) -> np.ndarray:
+    """Per world point: over the tissue block, ``EDGE_MARGIN`` inside its edges."""
     T_inv = np.linalg.inv(ctx.phantom.T_world_phantom)
     local = points @ T_inv[:3, :3].T + T_inv[:3, 3]
-    on_block = (
+    return (
         (TISSUE_X[0] + EDGE_MARGIN <= local[:, 0])
         & (local[:, 0] <= TISSUE_X[1] - EDGE_MARGIN)
         & (TISSUE_Y[0] + EDGE_MARGIN <= local[:, 1])
         & (local[:, 1] <= TISSUE_Y[1] - EDGE_MARGIN)
     )
+
+
+def landing_ok(ctx: TaskContext, points: np.ndarray) -> np.ndarray:
+    """Per world point on the tissue top: on the flat block (not the ridge, not past its
+    edges, ``EDGE_MARGIN`` inside) and inside both images."""
     flat = surface_height(ctx.phantom, points) <= TISSUE_TOP_Z + 1e-4
-    return on_block & flat & presentation.seen_by_both(ctx, points)
+    return on_block(ctx, points) & flat & presentation.seen_by_both(ctx, points)
