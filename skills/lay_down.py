@@ -165,12 +165,13 @@ class LayDown(Skill):
         """The spot where the needle most surely lands flat on the tissue in view: the share of
         its possible places (a circle two radii round the spot, either side of the jaw, moved
         by the tip displacements the arm's offsets may still cause) that lie on the flat top
-        (not the ridge, not off the block), in both images and not under the arm's
-        calibration jaw in the left image (``JAW_VIEW_MARGIN_PX``), plus (counted once more:
-        a needle off the block is lost, a fresh campaign trial's was) the share on the block;
-        ties nearest the centre.
-        Its release pose must be reachable, and the pick-up from at least ``PICK_SHARE`` of
-        the needle's orientations."""
+        (not the ridge, not off the block) and in both images must be ``MIN_LANDING_SHARE``;
+        spots are ranked by the share that is also not under the arm's calibration jaw in the
+        left image (``JAW_VIEW_MARGIN_PX``), plus (counted once more: a needle off the block
+        is lost, a fresh campaign trial's was) the share on the block; ties nearest the
+        centre.
+        Its release pose and the way there from where the arm is must be reachable, and the
+        pick-up from at least ``PICK_SHARE`` of the needle's orientations."""
         ctx = self.context
         T_hand = hand(ctx.needle, self.arc_angle)
         cam = ctx.camera.model.left
@@ -189,16 +190,22 @@ class LayDown(Skill):
             places = ring @ T_spot[:3, :3].T + T_spot[:3, 3]
             places = (places[:, None, :] + moved[None]).reshape(-1, 3)
             good = landing_ok(ctx, places)
+            if np.mean(good) < MIN_LANDING_SHARE:
+                reasons.append(
+                    f"too little of where it may land is flat tissue in view ({np.mean(good):.0%})"
+                )
+                continue
             if len(jaw_px):
                 px = cam.project(places)
                 gap = np.min(np.linalg.norm(px[:, None] - jaw_px[None], axis=2), axis=1)
                 good &= gap >= margin
             share = float(np.mean(good))
-            if share < MIN_LANDING_SHARE:
-                reasons.append(
-                    f"too little of where it may land is flat tissue in view, clear of "
-                    f"{arm.name}'s calibration jaw ({share:.0%})"
-                )
+            T_above = T_release.copy()
+            T_above[:3, 3] += ABOVE * ctx.phantom.T_world_phantom[:3, 2]
+            way = presentation.lifted_first(ctx, arm, T_above) + [T_release]
+            why = feasible(arm, way)
+            if why:  # a fresh held-out-style trial's wrist could not turn that far on the way
+                reasons.append(f"the way there out of reach ({why})")
                 continue
             picks = [grasp_path(ctx, _turned(T_spot, yaw), T_hand) for yaw in PICK_YAWS]
             whys = [w for w in (feasible(arm, p) for p in picks) if w]
