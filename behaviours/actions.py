@@ -118,14 +118,15 @@ class StandByAtExit(SkillBehaviour):
 
 
 class PickUpNeedle(SkillBehaviour):
-    """Localise the needle resting on the tissue and pick it up at ``angle(context)``."""
+    """Localise the needle resting on the tissue and pick it up at ``angle(context)``
+    (``free``: another arc angle will do when that one is out of reach)."""
 
-    def __init__(self, arm: str, angle: AngleRule, name: str | None = None):
+    def __init__(self, arm: str, angle: AngleRule, name: str | None = None, free: bool = False):
         super().__init__(name or f"Pick up the needle with {arm.upper()}")
-        self.arm, self.angle = arm, angle
+        self.arm, self.angle, self.free = arm, angle, free
 
     def make_skill(self):
-        return PickUp(self.context, self.arm, self.angle(self.context))
+        return PickUp(self.context, self.arm, self.angle(self.context), self.free)
 
 
 class CheckNeedleInHand(SkillBehaviour):

@@ -32,7 +32,7 @@ from suture_bt.geometry.phantom import TISSUE_TOP_Z
 from suture_bt.skills import checks
 from suture_bt.skills.base import Skill, SkillFailure, Waiting
 from suture_bt.skills.context import ArmHandle, NeedleNotSeen, NeedleObservation, TaskContext
-from suture_bt.skills.grasps import backed_off, held_arc_angle
+from suture_bt.skills.grasps import END_MARGIN, backed_off, held_arc_angle
 from suture_bt.skills.line_of_sight import make_way
 from suture_bt.skills.localize_needle import LocalizeNeedle
 from suture_bt.skills.motion import FINE, feasible, jaw_to, move_to, together
@@ -52,6 +52,8 @@ from suture_bt.transforms import invert
 JAW_OPEN = 0.8
 #: The grasp the images confirm must be this close to the asked arc angle (rad).
 ARC_TOLERANCE = np.deg2rad(10.0)
+#: Arc-angle steps (rad) a free pick-up tries from the asked angle, nearest first.
+FREE_STEPS = tuple(np.deg2rad(d) for d in (0.0, 15.0, -15.0, 30.0, -30.0))
 
 
 class PickUp(Skill):
@@ -60,10 +62,13 @@ class PickUp(Skill):
 
     name = "pick up"
 
-    def __init__(self, context: TaskContext, arm: str | None, arc_angle: float):
+    def __init__(self, context: TaskContext, arm: str | None, arc_angle: float, free: bool = False):
         super().__init__(context)
         self.arm_name = arm
         self.arc_angle = float(arc_angle)
+        #: Any arc angle will do (the taker hands it on): others are tried when this one's
+        #: grasp is out of reach (``FREE_STEPS`` away either side).
+        self.free = free
 
     def program(self) -> Waiting:
         ctx = self.context
@@ -80,11 +85,11 @@ class PickUp(Skill):
         ctx.needle_hint = None
         T_needle = ctx.belief.T_world_needle.copy()
 
-        arm, grasp, goal = self._choose_arm(T_needle, self._grasps(T_needle))
+        arm, grasp, goal = self._reach_some_angle(T_needle)
         which = grasp.hand
-        if abs(grasp.arc_angle - self.arc_angle) > 1e-9:  # on its edge: the clear point
+        if abs(grasp.arc_angle - self.arc_angle) > 1e-9:  # the clear point, or a free angle
             asked = float(np.rad2deg(grasp.arc_angle))
-            self.report["side_grasp_arc_angle_deg"] = asked
+            self.report["taken_at_arc_angle_deg"] = asked
         hover = backed_off(goal, APPROACH)
         self.report.update(
             arm=arm.name,
@@ -134,12 +139,33 @@ class PickUp(Skill):
         self.say(f"{arm.name} holds the needle at {got:.0f}°{note}")
 
     # ---------------------------------------------------------------- helpers
-    def _grasps(self, T_needle: np.ndarray) -> list[RestingGrasp]:
+    def _reach_some_angle(self, T_needle: np.ndarray):
+        """(arm, grasp, goal) at the asked arc angle, or, for a ``free`` pick-up whose asked
+        grasp is out of reach, at the nearest of ``FREE_STEPS`` that is in reach (a needle at
+        the block's corner was 0.05° past PSM1's roll limit at the asked angle)."""
+        needle = self.context.needle
+        lo, hi = needle.tip_angle + END_MARGIN, needle.base_angle - END_MARGIN
+        steps = FREE_STEPS if self.free else (0.0,)
+        angles = [
+            a for a in (self.arc_angle + s for s in steps) if lo <= a <= hi or a == self.arc_angle
+        ]
+        first = None
+        for a in angles:
+            try:
+                return self._choose_arm(T_needle, self._grasps(T_needle, a))
+            except SkillFailure as e:
+                if first is None:
+                    first = e
+                if "reach" not in e.reason:
+                    raise
+        raise first
+
+    def _grasps(self, T_needle: np.ndarray, arc_angle: float) -> list[RestingGrasp]:
         """The ways this needle can be taken (from above, or from the side on its edge)."""
         tilt, _ = resting_tilt(self.context, T_needle)
         self.report["needle_tilt_deg"] = float(np.rad2deg(tilt))
         try:
-            return resting_grasps(self.context, T_needle, self.arc_angle)
+            return resting_grasps(self.context, T_needle, arc_angle)
         except SkillFailure as e:
             raise SkillFailure(f"pick up: the needle is {e.reason}") from None
 

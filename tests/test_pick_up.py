@@ -186,3 +186,35 @@ def test_where_an_eye_saw_needle_is_found_on_the_tissue_top_for_the_arms_to_make
         assert np.linalg.norm(found - centre) < 0.0015  # the pixels' centre, back on the top
     ctx.sensor = SimpleNamespace(seen_pixels=lambda: (np.zeros((0, 2)), np.zeros((0, 2))))
     assert seen_on_tissue(ctx) is None  # nothing seen: nothing to make way for
+
+
+def test_a_free_pick_up_takes_another_arc_angle_when_the_asked_one_is_out_of_reach():
+    from types import SimpleNamespace
+
+    import pytest
+
+    from suture_bt.geometry import NeedleModel, PhantomModel
+    from suture_bt.skills import pick_up
+    from suture_bt.skills.base import SkillFailure
+
+    tried = []
+
+    def choose(self, T, grasps):
+        tried.append(round(float(np.rad2deg(grasps[0].arc_angle))))
+        if len(tried) < 3:
+            raise SkillFailure("needle out of psm1's reach: joint 4 (tool_roll) outside")
+        return "psm1", grasps[0], np.eye(4)
+
+    ctx = SimpleNamespace(needle=NeedleModel(), phantom=PhantomModel())
+    T = np.eye(4)
+    T[:3, 3] = (-0.02, 0.0, 0.0717)
+    free = pick_up.PickUp(ctx, "psm1", np.deg2rad(100.0), free=True)
+    free._choose_arm = choose.__get__(free)
+    arm, grasp, _ = free._reach_some_angle(T)
+    assert tried == [100, 115, 85] and round(float(np.rad2deg(grasp.arc_angle))) == 85
+    tried.clear()
+    fixed = pick_up.PickUp(ctx, "psm1", np.deg2rad(100.0))
+    fixed._choose_arm = choose.__get__(fixed)
+    with pytest.raises(SkillFailure, match="out of psm1's reach"):
+        fixed._reach_some_angle(T)  # the grasp matters: no other angle is tried
+    assert tried == [100]

@@ -67,7 +67,7 @@ def prepare(pairs: tuple[int, ...]) -> py_trees.behaviour.Behaviour:
             Calibrate(PULLER),
             LayDownNeedle(INSERTER, grasp),
             Calibrate(INSERTER, name="Calibrate PSM2 (jaw empty)"),
-            PickUpNeedle(INSERTER, grasp, name="PSM2 picks the laid down needle up"),
+            picked_up_from_tissue(grasp, pairs[0], "PSM2 picks the laid down needle up"),
         ],
     )
     presented = py_trees.composites.Sequence(
@@ -188,16 +188,19 @@ def picked_up_before_psm1_calibrates(grasp) -> py_trees.behaviour.Behaviour:
     )
 
 
-def picked_up_from_tissue(grasp, first_pair: int) -> py_trees.behaviour.Behaviour:
-    """Localise the resting needle and pick it up with PSM2 at the throws' grasp; when PSM2
-    cannot (out of its reach, refused), PSM1 picks it up clear of that grasp and hands it to
-    PSM2."""
+def picked_up_from_tissue(
+    grasp, first_pair: int, name: str | None = None
+) -> py_trees.behaviour.Behaviour:
+    """Localise the resting needle and pick it up with PSM2 at the throws' grasp (that
+    pick-up called ``name``); when PSM2 cannot (out of its reach, refused, closed empty),
+    PSM1 picks it up clear of that grasp (another angle if that one is out of its reach) and
+    hands it to PSM2."""
     by_psm1 = py_trees.composites.Sequence(
         "PSM1 picks it up and hands it to PSM2",
         memory=True,
         children=[
             JawEmpty(INSERTER, name="PSM2's jaw empty?"),
-            PickUpNeedle(PULLER, away_from_holder_and(grasp)),
+            PickUpNeedle(PULLER, away_from_holder_and(grasp), free=True),
             retried_handover(
                 HandOver(
                     PULLER,
@@ -212,5 +215,5 @@ def picked_up_from_tissue(grasp, first_pair: int) -> py_trees.behaviour.Behaviou
     return py_trees.composites.Selector(
         "Pick up with PSM2, else PSM1 and hand over",
         memory=True,
-        children=[PickUpNeedle(INSERTER, grasp), by_psm1],
+        children=[PickUpNeedle(INSERTER, grasp, name=name), by_psm1],
     )
