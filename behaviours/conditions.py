@@ -64,37 +64,41 @@ class JawEmpty(_Condition):
         return not held, detail
 
 
-class NeedleHangingInPair(_Condition):
-    """The free needle's estimate lies on pair ``pair``'s circle, its tip out past the exit:
-    dropped while being pulled through, the extraction can take it again."""
+class _FreeNeedleInPair(_Condition):
+    """Asks the subclass's ``check(context, pose, pair)`` ('' = yes, else why not) of the free
+    needle's estimate; ``yes`` completes the answer's feedback."""
 
-    def __init__(self, pair: int, name: str | None = None):
-        super().__init__(name or f"Needle hanging in pair {pair}?")
+    def __init__(self, pair: int, name: str):
+        super().__init__(name)
         self.pair = pair
 
     def ask(self) -> tuple[bool, str]:
         b = self.context.belief
         if b is None or b.holder is not None:
             return False, "no estimate of a free needle"
-        why_not = hanging_in_pair(self.context, b.T_world_needle, self.pair)
-        return not why_not, why_not or f"on pair {self.pair}'s circle, its tip out"
+        why_not = self.check(self.context, b.T_world_needle, self.pair)
+        return not why_not, why_not or f"on pair {self.pair}'s circle, {self.yes}"
 
 
-class NeedleDrivenInPair(_Condition):
+class NeedleHangingInPair(_FreeNeedleInPair):
+    """The free needle's estimate lies on pair ``pair``'s circle, its tip out past the exit:
+    dropped while being pulled through, the extraction can take it again."""
+
+    check, yes = staticmethod(hanging_in_pair), "its tip out"
+
+    def __init__(self, pair: int, name: str | None = None):
+        super().__init__(pair, name or f"Needle hanging in pair {pair}?")
+
+
+class NeedleDrivenInPair(_FreeNeedleInPair):
     """The free needle's estimate lies on pair ``pair``'s circle, its tip past the entry but
     not yet out far enough for the puller: dropped while being inserted, the inserting arm
     can take it again and drive it on."""
 
-    def __init__(self, pair: int, name: str | None = None):
-        super().__init__(name or f"Needle part way through pair {pair}?")
-        self.pair = pair
+    check, yes = staticmethod(driven_in_pair), "part way through"
 
-    def ask(self) -> tuple[bool, str]:
-        b = self.context.belief
-        if b is None or b.holder is not None:
-            return False, "no estimate of a free needle"
-        why_not = driven_in_pair(self.context, b.T_world_needle, self.pair)
-        return not why_not, why_not or f"on pair {self.pair}'s circle, part way through"
+    def __init__(self, pair: int, name: str | None = None):
+        super().__init__(pair, name or f"Needle part way through pair {pair}?")
 
 
 class TipSeenShort(_Condition):

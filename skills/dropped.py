@@ -85,39 +85,56 @@ def caught_in_tissue(context: TaskContext, T_world_needle: np.ndarray) -> str:
     return ""
 
 
-def on_pair_circle(context: TaskContext, T_world_needle: np.ndarray, pair: int):
-    """(why not, the sweep angle) of a needle pose on pair ``pair``'s planned circle
-    (:func:`~suture_bt.skills.checks.on_planned_circle`; a pair with no circle: why)."""
+def _on_circle(context: TaskContext, T_world_needle: np.ndarray, pair: int):
+    """(why not, the sweep angle, the planned circle) of a needle pose on pair ``pair``'s
+    circle (:func:`~suture_bt.skills.checks.on_planned_circle`; a pair with no circle: why)."""
     try:
         arc = context.plan(pair, f"pair {pair}")
     except SkillFailure as e:
-        return e.reason, 0.0
-    return checks.on_planned_circle(arc, T_world_needle, pair)
+        return e.reason, 0.0, None
+    why_not, phi = checks.on_planned_circle(arc, T_world_needle, pair)
+    return why_not, phi, arc
+
+
+def _tip_out_mm(arc, phi: float) -> float:
+    return 1e3 * arc.tip_height_above_exit(phi)
 
 
 def hanging_in_pair(context: TaskContext, T_world_needle: np.ndarray, pair: int) -> str:
     """'' when the needle lies on pair ``pair``'s planned circle with its tip out past the
     exit far enough for the puller's grasp (dropped during the pull: the extraction can take
     it again where it hangs); else why not."""
-    why_not, phi = on_pair_circle(context, T_world_needle, pair)
+    why_not, phi, arc = _on_circle(context, T_world_needle, pair)
     if why_not:
         return why_not
-    out = 1e3 * context.plan(pair, f"pair {pair}").tip_height_above_exit(phi)
+    out = _tip_out_mm(arc, phi)
     if out < MIN_TIP_OUT_MM:
         return f"its tip only {out:.1f} mm out past exit {pair} (< {MIN_TIP_OUT_MM:g} mm)"
     return ""
+
+
+def _past_entry(context: TaskContext, T_world_needle: np.ndarray, pair: int):
+    """:func:`_on_circle`, and why not when the tip is not yet past the entry."""
+    why_not, phi, arc = _on_circle(context, T_world_needle, pair)
+    if not why_not and phi <= 0.0:
+        why_not = f"its tip not yet in entry {pair} (sweep {np.rad2deg(phi):.0f}°)"
+    return why_not, phi, arc
+
+
+def part_way_through(context: TaskContext, T_world_needle: np.ndarray, pair: int) -> str:
+    """'' when the needle lies on pair ``pair``'s planned circle with its tip past the entry
+    (in the tissue, or through it); else why not."""
+    return _past_entry(context, T_world_needle, pair)[0]
 
 
 def driven_in_pair(context: TaskContext, T_world_needle: np.ndarray, pair: int) -> str:
     """'' when the needle lies on pair ``pair``'s planned circle past the entry but short of
     the puller's grasp past the exit (dropped during the insertion: the inserting arm can take
     it again where it hangs and drive it on); else why not."""
-    why_not, phi = on_pair_circle(context, T_world_needle, pair)
+    why_not, phi, arc = _past_entry(context, T_world_needle, pair)
     if why_not:
         return why_not
-    if phi <= 0.0:
-        return f"its tip not yet in entry {pair} (sweep {np.rad2deg(phi):.0f}°)"
-    if not hanging_in_pair(context, T_world_needle, pair):
+    if _tip_out_mm(arc, phi) >= MIN_TIP_OUT_MM:
         return f"its tip out past exit {pair} far enough for the puller"
     return ""
 

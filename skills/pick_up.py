@@ -151,13 +151,11 @@ class PickUp(Skill):
         ]
         first = None
         for a in angles:
+            grasps = self._grasps(T_needle, a)  # no grasp at all: no other angle helps
             try:
-                return self._choose_arm(T_needle, self._grasps(T_needle, a))
-            except SkillFailure as e:
-                if first is None:
-                    first = e
-                if "reach" not in e.reason:
-                    raise
+                return self._choose_arm(T_needle, grasps)
+            except SkillFailure as e:  # out of reach at this angle
+                first = first or e
         raise first
 
     def _grasps(self, T_needle: np.ndarray, arc_angle: float) -> list[RestingGrasp]:

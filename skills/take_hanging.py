@@ -23,7 +23,7 @@ from suture_bt.planning import NeedleArcError
 from suture_bt.skills import checks
 from suture_bt.skills.base import Skill, SkillFailure, Waiting
 from suture_bt.skills.context import NeedleBelief, NeedleObservation, TaskContext
-from suture_bt.skills.dropped import on_pair_circle, seen_where_it_was
+from suture_bt.skills.dropped import part_way_through, seen_where_it_was
 from suture_bt.skills.grasps import END_MARGIN, JAW_CLEARANCE, backed_off, hand, tip_goal
 from suture_bt.skills.motion import FINE, feasible, jaw_to, let_go, move_to
 from suture_bt.skills.recover import BACK_OFF, JAW_OPEN
@@ -50,9 +50,8 @@ class TakeHanging(Skill):
         if b is None or b.holder is not None:
             raise SkillFailure(f"{where}: no estimate of a free needle to take")
         T_needle = b.T_world_needle.copy()
-        why, phi = on_pair_circle(ctx, T_needle, self.pair)
-        if why or phi <= 0.0:
-            why = why or f"its tip not yet in entry {self.pair}"
+        why = part_way_through(ctx, T_needle, self.pair)
+        if why:
             raise SkillFailure(f"{where}: the needle is not hanging part way through: {why}")
         arm = ctx.arm(self.arm_name)
         angle = self._grasp_angle(T_needle, ctx.plan(self.pair, where))
@@ -115,9 +114,8 @@ class LetGoInTissue(Skill):
         where = f"pair {self.pair}"
         b = ctx.held_by(self.arm_name, where)
         T_needle = ctx.predicted_needle()
-        why, phi = on_pair_circle(ctx, T_needle, self.pair)
-        if why or phi <= 0.0:
-            why = why or f"its tip not yet in entry {self.pair}"
+        why = part_way_through(ctx, T_needle, self.pair)
+        if why:
             raise SkillFailure(f"{where}: not letting go outside the tissue: {why}")
         arm = ctx.arm(self.arm_name)
         self.say(f"{where}: {arm.name} lets go; the tissue holds the needle")
