@@ -139,9 +139,7 @@ class LayDown(Skill):
         if not held or angle > checks.JAW_CLOSED_MAX:
             raise SkillFailure(f"lay down: {arm.name}'s jaw holds no needle ({detail})")
         T_spot, T_release = self._choose_spot(arm)
-        up = ctx.phantom.T_world_phantom[:3, 2]
-        T_above = T_release.copy()
-        T_above[:3, 3] += ABOVE * up
+        T_above = _above(ctx, T_release)
         self.report.update(
             spot=T_spot[:3, 3].tolist(),
             release_height_mm=float(
@@ -200,9 +198,7 @@ class LayDown(Skill):
                 gap = np.min(np.linalg.norm(px[:, None] - jaw_px[None], axis=2), axis=1)
                 good &= gap >= margin
             share = float(np.mean(good))
-            T_above = T_release.copy()
-            T_above[:3, 3] += ABOVE * ctx.phantom.T_world_phantom[:3, 2]
-            way = presentation.lifted_first(ctx, arm, T_above) + [T_release]
+            way = presentation.lifted_first(ctx, arm, _above(ctx, T_release)) + [T_release]
             why = feasible(arm, way)
             if why:  # a fresh held-out-style trial's wrist could not turn that far on the way
                 reasons.append(f"the way there out of reach ({why})")
@@ -226,6 +222,13 @@ class LayDown(Skill):
             f"lay down: no spot on the tissue where {arm.name} can lay the needle and pick it "
             f"up again ({'; '.join(kinds.values())})"
         )
+
+
+def _above(ctx: TaskContext, T_release: np.ndarray) -> np.ndarray:
+    """The pose ``ABOVE`` the release along the phantom's up axis (the way in and out)."""
+    T = np.array(T_release, dtype=float)
+    T[:3, 3] += ABOVE * ctx.phantom.T_world_phantom[:3, 2]
+    return T
 
 
 def on_block(ctx: TaskContext, points: np.ndarray) -> np.ndarray:

@@ -218,3 +218,47 @@ def test_a_free_pick_up_takes_another_arc_angle_when_the_asked_one_is_out_of_rea
     with pytest.raises(SkillFailure, match="out of psm1's reach"):
         fixed._reach_some_angle(T)  # the grasp matters: no other angle is tried
     assert tried == [100]
+
+
+def test_a_refused_fit_lying_flat_on_the_tissue_is_checked_by_a_primed_look():
+    from types import SimpleNamespace
+
+    from suture_bt.geometry import NeedleModel, PhantomModel
+    from suture_bt.geometry.phantom import TISSUE_TOP_Z
+    from suture_bt.skills.context import NeedleNotSeen, NeedleObservation
+    from suture_bt.skills.pick_up import _resting_answer
+
+    needle = NeedleModel()
+    flat = np.eye(4)
+    flat[:3, 3] = (-0.03, 0.0, TISSUE_TOP_Z + needle.wire_radius)
+    tilted = flat.copy()
+    c, s = np.cos(np.deg2rad(39.0)), np.sin(np.deg2rad(39.0))
+    tilted[:3, :3] = [[1, 0, 0], [0, c, -s], [0, s, c]]  # a refused fit into the tissue
+
+    class Sensor:
+        def __init__(self, refused, answer):
+            self.last_refused, self.answer, self.primed = refused, answer, []
+
+        def observe(self, previous=None, prior_checked=False, **_):
+            self.primed.append(prior_checked)
+            if self.answer is None:
+                raise NeedleNotSeen("refused again")
+            return NeedleObservation(self.answer, 1.0, 0.2, 0.1, "vision")
+
+    def ask(sensor):
+        ctx = SimpleNamespace(needle=needle, phantom=PhantomModel(), sensor=sensor, belief=None)
+        ctx.believe = lambda obs, holder: setattr(ctx, "belief", obs)
+        skill = SimpleNamespace(context=ctx, report={}, say=lambda text: None)
+        run = _resting_answer(skill)
+        try:
+            while True:
+                next(run)
+        except StopIteration as done:
+            return done.value, ctx.belief
+
+    ok, belief = ask(Sensor(flat, flat))
+    assert ok and belief is not None and np.allclose(belief.T_world_needle, flat)
+    sensor = Sensor(tilted, flat)
+    assert ask(sensor) == (False, None) and sensor.primed == []  # not where a needle rests
+    assert ask(Sensor(flat, None)) == (False, None)  # the primed look refuses too
+    assert ask(Sensor(flat, tilted))[0] is False  # it answers off the refused fit
