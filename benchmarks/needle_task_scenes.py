@@ -16,10 +16,12 @@ the task priors a caller would know there:
   (0.3 mm to the insertion's end), held by PSM2 at the insertion grasp
   (``skills.grasps.insertion_grasp_angle``), or by PSM1 at the pulling hand from the
   insertion's end until the base is 0.3 rad short of the exit (pulling through).
-- ``handover``: the giver presents the needle (as ``held_presented``); the taker's jaw comes
-  in along its length toward its grasp at another arc angle (at least the skills'
-  ``MIN_JAW_SEPARATION`` away), 0-20 mm back (the handover's stand-by distance), open, or
-  closed on the wire at 0 mm.
+- ``handover``: the giver presents the needle on the taker's side (the presentation
+  candidates toward the taker, as the handover skill asks); the taker's open jaw waits on
+  the way to a grasp it reaches at another arc angle (at least the skills'
+  ``MIN_JAW_SEPARATION`` away), 0-20 mm back (the skill's stand-by distance), in half the
+  scenes moved out of the cameras' sight lines as the skill moves it
+  (``skills.line_of_sight.clear_tip_pose``), in the other half not.
 
 Priors (``task``): held by the holder at its pinch point from its joints, with the needle's
 plane across its jaws (``AcrossJawsPrior``, the skills' calibrated tolerance); the arms in these
@@ -31,6 +33,7 @@ calibrating); in a port also the entry and exit ports (3 mm).
 
 from __future__ import annotations
 
+from itertools import islice
 from types import SimpleNamespace
 
 import numpy as np
@@ -38,7 +41,7 @@ import numpy as np
 from suture_bt.datagen.needle_data import SceneSample
 from suture_bt.kinematics import UnreachablePoseError, forward_kinematics, inverse_kinematics
 from suture_bt.perception.in_hand import JAW_POINT_IN_TIP
-from suture_bt.perception.needle_prior import AcrossJawsPrior, HeldPrior, PortPrior, arc_distance
+from suture_bt.perception.needle_prior import AcrossJawsPrior, HeldPrior, PortPrior
 from suture_bt.planning import plan_needle_arc, to_base
 from suture_bt.skills import presentation
 from suture_bt.skills.grasps import (
@@ -50,6 +53,8 @@ from suture_bt.skills.grasps import (
     pulling_hand,
     tip_goal,
 )
+from suture_bt.skills.handover import STANDBY
+from suture_bt.skills.line_of_sight import clear_tip_pose
 from suture_bt.skills.localize_needle import ACROSS_JAWS_DEG_CALIBRATED
 
 TASK_SETS = ("held_start", "held_presented", "in_port", "handover")
@@ -199,35 +204,56 @@ def in_port(sim, rng):
         q = {arm: q_arm, _other(arm): INITIAL_JP[_other(arm)].copy()}
         jaw = {arm: JAW_CLOSED, _other(arm): 0.5}
         priors = _held(sim, arm, q_arm)
-        for port in (entry, exit_):
-            if arc_distance(port.position, T, m) <= PORT_TOL:
-                priors.append(PortPrior(port.name, port.position, PORT_TOL, port.normal))
+        for port in (entry, exit_):  # the ports the wire crosses (the prior's own test)
+            prior = PortPrior(port.name, port.position, PORT_TOL, port.normal)
+            if prior.miss(T, m) <= 1.0:
+                priors.append(prior)
         return _sample("in_port", T, q, jaw, rng), priors
     raise RuntimeError("no reachable in-port grasp in 100 draws")
 
 
 def handover(sim, rng):
     m = sim.model
+    ctx = _ctx(sim)
     for _ in range(100):
         giver = ("psm1", "psm2")[int(rng.integers(2))]
         taker = _other(giver)
-        a_give = rng.uniform(m.tip_angle + END_MARGIN, m.base_angle - END_MARGIN)
-        got = _presented(sim, rng, giver, hand(m, a_give))
-        if got is None:
+        # The giver presents on the taker's side, as the handover skill asks.
+        cands = list(
+            islice(
+                presentation.iter_candidates(
+                    ctx,
+                    _Arm(giver, sim.sampler.bases[giver], INITIAL_JP[giver]),
+                    toward=_Arm(taker, sim.sampler.bases[taker], INITIAL_JP[taker]),
+                ),
+                3,
+            )
+        )
+        if not cands:
             continue
-        q_give, T = got
+        T_tip = cands[int(rng.integers(len(cands)))]
+        q_give = _ik(sim, giver, T_tip, INITIAL_JP[giver])
+        if q_give is None:
+            continue
+        a_give = rng.uniform(m.tip_angle + END_MARGIN, m.base_angle - END_MARGIN)
+        T = T_tip @ hand(m, a_give)
         angles = np.linspace(m.tip_angle + END_MARGIN, m.base_angle - END_MARGIN, 40)
         angles = angles[np.abs(angles - a_give) >= MIN_JAW_SEPARATION]
-        if not len(angles):
-            continue
-        a_take = float(rng.choice(angles))
-        d = float(rng.choice([0.0, rng.uniform(0.0, 0.02)]))
-        T_take = backed_off(tip_goal(T, hand(m, a_take, pulling=bool(rng.integers(2)))), d)
-        q_take = _ik(sim, taker, T_take, INITIAL_JP[taker])
+        rcm = sim.sampler.bases[taker][:3, 3]
+        q_take = None
+        for a_take in rng.permutation(angles):  # a grasp the taker reaches, at random
+            goal = tip_goal(T, hand(m, float(a_take), pulling=bool(rng.integers(2))))
+            if _ik(sim, taker, goal, INITIAL_JP[taker]) is None:
+                continue
+            wait = backed_off(goal, float(rng.uniform(0.0, STANDBY)))
+            wait = clear_tip_pose(ctx, wait, rcm, T[:3, 3]) if rng.random() < 0.5 else wait
+            q_take = _ik(sim, taker, wait, INITIAL_JP[taker]) if wait is not None else None
+            if q_take is not None:
+                break
         if q_take is None:
             continue
         q = {giver: q_give, taker: q_take}
-        jaw = {giver: JAW_CLOSED, taker: JAW_CLOSED if d == 0.0 else JAW_OPEN}
+        jaw = {giver: JAW_CLOSED, taker: JAW_OPEN}
         priors = _held(sim, giver, q_give)
         return _sample("handover", T, q, jaw, rng), priors
     raise RuntimeError("no reachable handover in 100 draws")

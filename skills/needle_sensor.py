@@ -49,8 +49,9 @@ DARK_SHARE = 0.6
 HELD_TOLERANCE = 0.004
 HELD_TOLERANCE_CALIBRATED = 0.001
 #: A needle whose centre is predicted nearer the left camera than the localiser's floor
-#: (``MIN_DEPTH``) plus this (m) is not worth a look: the localiser refuses it (measured: the
-#: in-hand check's views 28 and 44 mm away were refused on every pair that had them).
+#: (``MIN_DEPTH``, 20 mm) plus this (m) is not worth a look: the localiser refuses it. (With
+#: the floor at 50 mm the in-hand check's risen views, 28 and 44 mm away, were refused on every
+#: pair that had them.)
 RANGE_MARGIN = 0.003
 
 

@@ -102,11 +102,11 @@ def test_keypoint_depth_contradicted_by_the_masks_neither_gates_nor_hints():
     left[500:506, 900:1000] = (160, 160, 168)  # a wire 6 px wide: 0.72 mm at 0.1 m
     right[500:506, 900 - round(d) : 1000 - round(d)] = (160, 160, 168)
     prob = np.ones((2, 270, 480), np.float32)
-    views, half_width, depth = loc._masks((left, right), prob, 4.0, 0.3)
+    views, half_width, depth, _ = loc._masks((left, right), prob, 4.0, 0.3)
     assert views[0].mask.sum() == 600 and views[1].mask.sum() == 600
     assert depth is None and half_width > 3.0
     # Agreeing depths are kept as the fit's hint.
-    _, _, depth = loc._masks((left, right), prob, 4.0, 0.105)
+    _, _, depth, _ = loc._masks((left, right), prob, 4.0, 0.105)
     assert depth == 0.105
 
 
@@ -124,7 +124,7 @@ def test_masks_mark_the_occluder_and_keep_it_with_the_free_space_term():
             img[480:526, 1000 - shift : 1040 - shift] = (190, 190, 196)  # a thick jaw at its end
             images.append(img)
         prob = np.ones((2, 270, 480), np.float32)
-        views, _, _ = loc._masks(tuple(images), prob, 4.0, 0.1)
+        views, _, _, _ = loc._masks(tuple(images), prob, 4.0, 0.1)
         v = views[0]
         assert v.occluder is not None and v.occluder.any()
         assert not (v.occluder & v.mask).any()

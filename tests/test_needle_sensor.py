@@ -14,7 +14,8 @@ def _at_depth(depth: float) -> np.ndarray:
 
 
 def test_a_needle_nearer_than_the_localisers_floor_is_out_of_range():
-    assert not in_working_range(CAMERA, _at_depth(0.028))  # the in-hand check's risen view
+    assert not in_working_range(CAMERA, _at_depth(0.015))
+    assert in_working_range(CAMERA, _at_depth(0.028))  # the in-hand check's risen view
     assert not in_working_range(CAMERA, _at_depth(MIN_DEPTH))
     assert in_working_range(CAMERA, _at_depth(MIN_DEPTH + RANGE_MARGIN + 1e-4))
     assert in_working_range(CAMERA, _at_depth(0.12))

@@ -153,12 +153,13 @@ def test_tissue_model_hides_what_the_block_is_in_front_of():
     assert inside(pts, margin=0.0015).tolist() == [True, False, False, False]
 
 
-def test_localizer_refuses_the_mirror_twin_of_the_held_needle_at_the_task3_start():
-    """Development scene (seed 6173, held_start #6): the localiser used to answer the
-    tilt-mirror twin 19.5 mm / 173 deg off (residual 0.43 px, passing every other gate); its
-    arc runs 6 mm over the tissue in front of which the needle is held. With the task's
-    tissue model that is a refusal naming it (without one, any tissue-coloured pixel may hide
-    the needle and this twin is not caught)."""
+def test_localizer_refuses_the_mirror_twin_of_the_held_needle_at_the_task3_start(monkeypatch):
+    """Development scene (seed 6173, held_start #6): with the working floor at 50 mm (the
+    needle is 46 mm away) the localiser used to answer the tilt-mirror twin 19.5 mm / 173 deg
+    off (residual 0.43 px, passing every other gate); its arc runs 6 mm over the tissue in
+    front of which the needle is held. With the task's tissue model that is a refusal naming
+    it (without one, any tissue-coloured pixel may hide the needle and this twin is not
+    caught). The floor is 20 mm now, and the needle's own pose is found."""
     import sys
     from pathlib import Path
 
@@ -169,10 +170,12 @@ def test_localizer_refuses_the_mirror_twin_of_the_held_needle_at_the_task3_start
     import needle_task_scenes
 
     from suture_bt.datagen.needle_data import SimScene
+    from suture_bt.perception import needle_localizer
     from suture_bt.perception.needle_localizer import NeedleLocalizer
     from suture_bt.perception.pose_fit import NeedleNotFound
     from suture_bt.perception.unseen_arc import tissue_model
 
+    monkeypatch.setattr(needle_localizer, "MIN_DEPTH", 0.05)
     sim = SimScene(1920, 1080)
     try:
         ci = needle_pose.SETS.index("held_start")

@@ -75,13 +75,30 @@ class HeldPrior:
         )
 
 
+def plane_crossings(
+    T_world_needle: np.ndarray, model: NeedleModel, point: np.ndarray, normal: np.ndarray
+) -> np.ndarray:
+    """World points (N×3) where the needle's centre-line crosses the plane through ``point``
+    with ``normal`` (linear between 1° samples of the arc: ≤ 2 µm off the circle)."""
+    n = max(int(np.degrees(model.arc_angle)), 2)
+    local = model.point_at(np.linspace(model.base_angle, model.tip_angle, n))
+    world = local @ T_world_needle[:3, :3].T + T_world_needle[:3, 3]
+    h = (world - np.asarray(point, float)) @ np.asarray(normal, float)
+    k = np.nonzero(np.sign(h[:-1]) * np.sign(h[1:]) < 0)[0]
+    w = h[k] / (h[k] - h[k + 1])
+    return world[k] + w[:, None] * (world[k + 1] - world[k])
+
+
 @dataclass(frozen=True)
 class PortPrior:
     """In port ``port``: the arc passes within ``tolerance`` (m) of ``point`` (world).
 
     ``normal`` (optional, world: the port's outward surface normal) says which side of the
-    port is tissue: the needle's part below every given port's surface plane may be hidden
-    by the tissue (:mod:`unseen_arc`); without it the tissue hides nothing."""
+    port is tissue. With it, "in the port" means the wire *crosses* the port's surface plane
+    within ``tolerance`` of the port: an arc that only ends at the port (its hidden part
+    turned back out of the tissue, the edge-on twin of a needle in a port) is not in it. The
+    needle's part below every given port's surface plane may then be hidden by the tissue
+    (:mod:`unseen_arc`); without a normal the tissue hides nothing."""
 
     port: str
     point: np.ndarray
@@ -89,13 +106,21 @@ class PortPrior:
     normal: np.ndarray | None = None
 
     def miss(self, T_world_needle: np.ndarray, model: NeedleModel) -> float:
-        """Distance from the port to the arc over the tolerance (≤ 1: consistent)."""
-        return arc_distance(self.point, T_world_needle, model) / self.tolerance
+        """Distance from the port to the arc (with a normal: to the nearest place where the
+        arc crosses the port's plane) over the tolerance (≤ 1: consistent)."""
+        near = arc_distance(self.point, T_world_needle, model)
+        if self.normal is None:
+            return near / self.tolerance
+        crossings = plane_crossings(T_world_needle, model, self.point, self.normal)
+        if not len(crossings):
+            return max(near / self.tolerance, 1.0) + 1.0  # never consistent
+        return float(np.min(np.linalg.norm(crossings - self.point, axis=1))) / self.tolerance
 
     def refusal(self, nearest: float) -> str:
         """The reason when the nearest candidate misses by ``nearest`` tolerances."""
+        how = "through" if self.normal is None else "through (crossing its surface at)"
         return (
-            f"no fitted pose passes through port {self.port}: nearest "
+            f"no fitted pose passes {how} port {self.port}: nearest "
             f"{1e3 * nearest * self.tolerance:.1f} mm, tolerance {1e3 * self.tolerance:.1f} mm"
         )
 
