@@ -7,12 +7,17 @@ from perception_helpers import pose_errors
 from test_pose_fit import MODEL, _scene_1080p, _tip_hidden
 
 from suture_bt.perception.needle_prior import (
+    SEED_PLACES,
+    SEED_TURNS,
+    AcrossJawsPrior,
     HeldPrior,
     PortPrior,
     PredictedPosePrior,
     PriorContradicted,
     arc_distance,
     check_orientation,
+    plane_crossings,
+    seed_poses,
 )
 from suture_bt.perception.pose_fit import NeedleNotFound, PoseFitter
 from suture_bt.transforms import make_transform
@@ -226,3 +231,42 @@ def test_sensor_adds_the_across_jaws_prior_when_given_its_tolerance():
     turned = np.array([0.0, 0.0, 1.0])  # a needle picked up turned over: its belief says so
     _, jaws = VisionNeedleSensor.priors(None, False, ("psm2", tip), 0.003, 20.0, turned)
     np.testing.assert_allclose(jaws.face, turned)
+
+
+def test_port_prior_with_a_normal_asks_the_wire_to_cross_the_port_plane():
+    """A needle in a port crosses the port's surface there; an arc that only ends at the port,
+    the rest of it on the outside (the edge-on twin of a needle in a port), is not in it."""
+    T = make_transform(np.eye(3), (0.0, 0.0, 0.1))
+    a = MODEL.tip_angle + 0.6
+    at = _arc_point(T, a)
+    inward = T[:3, :3] @ MODEL.tangent_at(a)  # the wire goes on along its tangent
+    port = PortPrior("entry1", at, tolerance=0.003, normal=-inward)
+    assert port.miss(T, MODEL) < 0.01
+    assert len(plane_crossings(T, MODEL, at, -inward)) == 1
+    tip = _arc_point(T, MODEL.tip_angle)
+    # The port at the tip, its outward normal along the wire's way back: every other point
+    # of the arc lies outside, so nothing crosses the surface.
+    back = T[:3, :3] @ MODEL.tangent_at(MODEL.tip_angle)
+    ends_there = PortPrior("exit1", tip, tolerance=0.003, normal=back)
+    assert arc_distance(tip, T, MODEL) < 1e-9  # the old test: on the arc
+    assert ends_there.miss(T, MODEL) > 1.0
+    assert "crossing its surface" in ends_there.refusal(ends_there.miss(T, MODEL))
+    assert PortPrior("exit1", tip, tolerance=0.003).miss(T, MODEL) < 1e-6  # no normal: as before
+
+
+def test_seed_poses_pass_the_pinch_point_with_the_held_face_and_nearest_the_port():
+    pinch = np.array([0.01, 0.02, 0.1])
+    face = np.array([0.3, 0.2, -0.9])
+    held = HeldPrior("psm1", pinch, 0.001)
+    jaws = AcrossJawsPrior("psm1", face, 30.0)
+    seeds = seed_poses([held, jaws], MODEL)
+    assert len(seeds) == SEED_TURNS * SEED_PLACES
+    assert max(held.miss(T, MODEL) for T in seeds) < 1e-9
+    assert max(jaws.angle_deg(T) for T in seeds) < 1e-6
+    assert len(seed_poses([held], MODEL)) == 0  # the face is needed to pin the plane
+    port_at = _arc_point(seeds[7], MODEL.tip_angle + 0.3)
+    port = PortPrior("entry1", port_at, 0.003)
+    near = seed_poses([held, jaws, port], MODEL)
+    assert len(near) == 4 * SEED_PLACES
+    assert min(port.miss(T, MODEL) for T in near) < 0.5
+

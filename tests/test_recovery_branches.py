@@ -146,7 +146,9 @@ def test_needle_dropped_before_the_insertion_is_picked_up_and_the_throw_resumed(
 @pytest.mark.slow
 def test_needle_dropped_part_way_through_the_insertion_is_taken_again_and_driven_on(session):
     # 1.2 s into the sweep through pair 1 the jaw loses the needle: the tissue holds it, its
-    # tip not yet out past the exit (the unprimed look refuses a needle mostly in the ridge).
+    # tip not yet out past the exit. It is seen where the gripper left it (a look checked
+    # against that pose; before the localiser's floor came down to 20 mm it was refused and
+    # the frame was read along the circle instead, tip_reading.read_hanging).
     assert session.run_until(running(session, "Insert pair 1", "driving the needle"))
     session.step(60)
     session.world.faults.drop("psm2")
@@ -155,7 +157,7 @@ def test_needle_dropped_part_way_through_the_insertion_is_taken_again_and_driven
     reports = session.context.reports
     found = next(r for r in reports if r["skill"] == "find dropped needle")
     assert found["status"] == "SUCCESS" and found["driven_in_pair"] == 1
-    assert found["where_it_was"].startswith("hanging there: read")
+    assert found["where_it_was"].startswith(("seen", "hanging there: read"))
     done = [(r["behaviour"], r["status"]) for r in reports if r["t_start"] >= found["t_start"]]
     assert done[:4] == [
         ("Find the dropped needle", "SUCCESS"),

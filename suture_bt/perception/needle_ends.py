@@ -264,10 +264,14 @@ def base_evidence(
     T_cam_needle: np.ndarray,
     model: NeedleModel,
     end_hidden: Callable[[int, np.ndarray], bool] | None = None,
+    ends_cut: tuple[bool, bool] = (False, False),
 ) -> float:
     """Mean vote of both eyes: violet at the fitted base, grey at the fitted tip and violet
     pixels nearer the fitted base than the tip vote > 0 (base and tip right), the opposite < 0
     (swapped); 0 when nothing is seen.
+
+    ``ends_cut`` (base, tip): the fitted end is where the wire goes into something known to
+    hide it (the tissue: the needle may go on inside), so grey there does not vote either.
 
     ``T_cam_needle`` is in the first camera's frame; ``cams[1]`` is placed relative to it.
     ``end_hidden(eye, uv)`` tells whether an end pixel touches an occluder: grey there only
@@ -288,6 +292,10 @@ def base_evidence(
                 sb = None
             if st is not None and st < VIOLET_THRESHOLD and end_hidden(eye, ends_uv[1]):
                 st = None
+        if sb is not None and sb < VIOLET_THRESHOLD and ends_cut[0]:
+            sb = None
+        if st is not None and st < VIOLET_THRESHOLD and ends_cut[1]:
+            st = None
         # Each visible end votes: violet where the fit put the base, grey where it put the tip.
         if sb is not None:
             votes.append(sb - VIOLET_THRESHOLD)

@@ -52,6 +52,7 @@ from suture_bt.perception.needle_prior import (
     PriorContradicted,
     check_across_jaws,
     check_orientation,
+    seed_poses,
 )
 from suture_bt.perception.network import (
     INPUT_SIZE,
@@ -125,6 +126,9 @@ RIM_REACH = 0.6
 #: A fitted end whose pixel is farther than this from the needle mask is not seen: the fit put
 #: it behind something, and the grey wire leading up to it says nothing about which end it is.
 END_ON_MASK_PX = 2.0
+#: How far past a fitted end (m, along the circle) the wire is looked for inside the tissue,
+#: and how deep inside it must be there (m) for the end to count as cut by the tissue.
+CUT_PROBE, CUT_DEPTH = 0.002, 0.0003
 #: Farthest the seen swage band may start from the fitted base (m, along the arc): half a band
 #: length of slack past the band's own 3 mm.
 MAX_BAND_OFFSET = 1.5 * BAND_LENGTH
@@ -572,6 +576,9 @@ class NeedleLocalizer:
                 end_priors[eye] = np.concatenate([end_priors[eye], bands[eye].mean(0)[None]])
         end_priors = tuple(end_priors)
 
+        seeds = seed_poses(priors, self.model)
+        seeds = self.stereo.left.T_cam_world[None] @ seeds if len(seeds) else None
+
         def attempt(main, alternatives, depth_hint=None) -> PoseFitResult:
             return self.fitter.fit(
                 views[0],
@@ -583,6 +590,7 @@ class NeedleLocalizer:
                 end_priors=end_priors,
                 hidden_end=hidden,
                 priors=priors,
+                seeds=seeds,
             )
 
         fit = None
@@ -640,6 +648,19 @@ class NeedleLocalizer:
             else (self.max_angle_std_deg)
         )
 
+    def _ends_in_tissue(self, T_cam: np.ndarray) -> tuple[bool, bool]:
+        """(base, tip): whether the circle continued CUT_PROBE past that fitted end runs into
+        the known tissue (a needle in a port: the wire may go on inside, and the grey where
+        the fit ends it is not its tip). (False, False) without a tissue model."""
+        if self.tissue is None:
+            return False, False
+        m, T = self.model, self.stereo.left.T_world_cam @ T_cam
+        step = CUT_PROBE / m.radius
+        past = m.point_at(np.array([m.base_angle + step, m.tip_angle - step]))
+        world = past @ T[:3, :3].T + T[:3, 3]
+        inside = self.tissue(world, margin=CUT_DEPTH)
+        return bool(inside[0]), bool(inside[1])
+
     def _orient(self, T_cam: np.ndarray, images, views, half_width: float, previous, jaws=()):
         """Base↔tip choice: the swage band's colour, else continuity with ``previous``, else
         the holder's jaws (``jaws``: :class:`AcrossJawsPrior`, the needle's face as held);
@@ -666,6 +687,7 @@ class NeedleLocalizer:
             T_cam,
             self.model,
             end_hidden=end_hidden,
+            ends_cut=self._ends_in_tissue(T_cam),
         )
         if abs(evidence) >= MIN_EVIDENCE:
             T_cam = T_cam if evidence > 0 else swapped(T_cam, self.model)

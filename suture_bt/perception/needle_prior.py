@@ -249,3 +249,49 @@ def check_orientation(
                 f"the needle's ends disagree with {p.source}: {dp * 1e3:.1f} mm / {da:.0f}° "
                 f"from it once base and tip were told apart ({decided_by})"
             )
+
+
+#: Seeds per held needle: turns of the radius at the pinch point about the needle's normal,
+#: and places of the pinch along the arc (from the tip to the base).
+SEED_TURNS, SEED_PLACES = 16, 5
+
+
+def seed_poses(priors: Sequence[NeedlePrior], model: NeedleModel) -> np.ndarray:
+    """World poses (K, 4, 4) that agree with a held-by prior and the across-the-jaws face
+    of the same arm: the fit's starts for a needle whose seen piece alone leaves it loose or
+    whose twins the image search finds first (empty: the priors do not pin a needle).
+
+    The circle passes through the pinch point with its normal along the face; what is left
+    free, the radius's turn at the pinch and where along the arc the jaw holds it, is
+    sampled (SEED_TURNS × SEED_PLACES). With a port prior the turns are those whose circle
+    passes nearest the port as well."""
+    held = {p.arm: p for p in priors if isinstance(p, HeldPrior)}
+    faces = [p for p in priors if isinstance(p, AcrossJawsPrior) and p.arm in held]
+    if not faces:
+        return np.zeros((0, 4, 4))
+    jaws, pinch = faces[0], np.asarray(held[faces[0].arm].pinch_point, float)
+    z = np.asarray(jaws.face, float) / np.linalg.norm(jaws.face)
+    e0 = np.cross(z, [1.0, 0.0, 0.0] if abs(z[0]) < 0.9 else [0.0, 1.0, 0.0])
+    e0 /= np.linalg.norm(e0)
+    e1 = np.cross(z, e0)
+    turns = np.linspace(0.0, 2 * np.pi, SEED_TURNS, endpoint=False)
+    ports = [p for p in priors if isinstance(p, PortPrior)]
+    if ports:
+        centres = pinch - model.radius * (np.cos(turns)[:, None] * e0 + np.sin(turns)[:, None] * e1)
+        miss = [
+            abs(np.linalg.norm(np.cross(ports[0].point - c, z)) - model.radius) for c in centres
+        ]
+        turns = turns[np.argsort(miss)[:4]]
+    places = np.linspace(model.tip_angle, model.base_angle, SEED_PLACES + 2)[1:-1]
+    out = []
+    for psi in turns:
+        radial = np.cos(psi) * e0 + np.sin(psi) * e1  # centre → pinch, world
+        for a in places:
+            # Needle frame: the pinch at arc angle a, so x turns by -a from the radial.
+            x = np.cos(-a) * radial + np.sin(-a) * np.cross(z, radial)
+            R = np.column_stack([x, np.cross(z, x), z])
+            T = np.eye(4)
+            T[:3, :3] = R
+            T[:3, 3] = pinch - model.radius * radial
+            out.append(T)
+    return np.array(out)

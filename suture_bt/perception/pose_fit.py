@@ -86,6 +86,8 @@ class PoseFitResult:
     n_edge_points: tuple[int, int]
     ambiguity: float
     candidates: list = field(default_factory=list, repr=False)
+    #: The polished candidates' costs (inf: outside the working range), as ``candidates``.
+    candidate_costs: tuple[float, ...] = ()
     angle_std_deg: float = float("nan")
     position_std_mm: float = float("nan")
     #: The chosen pose's miss of each prior given, over its tolerance (≤ 1; empty: none).
@@ -148,8 +150,12 @@ class PoseFitter:
         end_priors: tuple[np.ndarray, np.ndarray] | None = None,
         hidden_end: bool | None = None,
         priors: Sequence[NeedlePrior] = (),
+        seeds: np.ndarray | None = None,
     ) -> PoseFitResult:
         """Fit; ``endpoints_left`` = (base uv, tip uv) in the left image; raise NeedleNotFound.
+
+        ``seeds`` (K, 4, 4: left-camera poses, e.g. :func:`~needle_prior.seed_poses` of the
+        priors) are further starts, the ``n_keep`` cheapest of them searched with the rest.
 
         ``end_priors`` (left, right pixel arrays) are keypoints the network is sure of: each
         pulls the nearer model end towards it (:class:`EndPriorTerm`). ``hidden_end`` says
@@ -196,7 +202,10 @@ class PoseFitter:
             if ends is None:
                 ends = _farthest_pair(el, rng)
             ub, ut = (np.asarray(e, float) for e in ends)
-            st = self._starts(ub, ut, hint)
+            return lowest(self._starts(ub, ut, hint), n)
+
+        def lowest(st: np.ndarray, n: int) -> np.ndarray:
+            """The n lowest-cost feasible rows of ``st`` on the coarse edge subset."""
             T0 = params_to_pose(st, cam, self.model)
             r0, _ = residuals(T0, coarse, self.model, grid=12)
             r0 = np.concatenate([r0] + [t(T0) for t in terms], 1)
@@ -208,6 +217,8 @@ class PoseFitter:
         parts += [best_starts(e, None, self.n_keep_alternative) for e in alternatives]
         if warm_start is not None:
             parts.append(pose_to_params(np.asarray(warm_start)[None], cam, self.model))
+        if seeds is not None and len(seeds):
+            parts.append(lowest(pose_to_params(np.asarray(seeds), cam, self.model), self.n_keep))
         starts = np.concatenate(parts)
         if not len(starts):
             raise NeedleNotFound("no feasible pose hypothesis from the needle's end points")
@@ -289,6 +300,7 @@ class PoseFitter:
             n_edge_points=(len(el), len(er)),
             ambiguity=amb,
             candidates=[params_to_pose(xx, cam, self.model) for xx in xf],
+            candidate_costs=tuple(float(v) for v in cf),
             angle_std_deg=ang_std,
             position_std_mm=pos_std,
             prior_misses=() if misses is None else tuple(float(m) for m in misses[b]),
