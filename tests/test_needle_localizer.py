@@ -4,13 +4,11 @@ bad inputs a clear ValueError, and (with the shipped weights) a rendered needle 
 import numpy as np
 import pytest
 import torch
-from perception_helpers import pose_errors, random_needle_pose, stereo
+from perception_helpers import pose_errors, stereo
 
-from suture_bt.perception.needle_ends import swapped
 from suture_bt.perception.needle_localizer import NeedleLocalizer
-from suture_bt.perception.needle_projection import rasterize_needle
 from suture_bt.perception.network import DEFAULT_WEIGHTS, NeedleNet
-from suture_bt.perception.pose_fit import MaskView, NeedleNotFound
+from suture_bt.perception.pose_fit import NeedleNotFound
 from suture_bt.transforms import invert
 
 
@@ -142,71 +140,6 @@ def test_keypoints_farther_apart_than_the_needle_can_appear_keep_only_the_strong
     assert score[0, 1] == 0.47  # the raw scores are left alone
     far_weak = np.array([[0.1, 0.9], [0.6, 0.7]])  # an untrusted keypoint is no rival
     np.testing.assert_array_equal(loc._plausible(kp, far_weak), far_weak)
-
-
-def test_without_the_band_the_ends_follow_the_previous_estimate_or_are_refused():
-    """A needle whose swage band is not seen: base and tip look alike, so the localiser keeps
-    the orientation nearer the previous estimate, and without one refuses to guess."""
-    st = stereo(960, 540)
-    loc = NeedleLocalizer(st, net=_blind_net())
-    T = random_needle_pose(np.random.default_rng(3), 0.08, 0.12)
-    images, views = [], []
-    for cam in (st.left, st.right):
-        mask = rasterize_needle(cam, invert(cam.T_world_cam) @ st.left.T_world_cam @ T, loc.model)
-        img = np.empty((540, 960, 3), np.uint8)
-        img[:] = (215, 140, 132)
-        img[mask] = (158, 161, 168)  # grey all along: no violet band
-        images.append(img)
-        views.append(MaskView(mask))
-    with pytest.raises(NeedleNotFound, match="which end is the base"):
-        loc._orient(T, images, views, 3.0, None)
-    for previous in (T, swapped(T, loc.model)):
-        out, _, decided_by = loc._orient(T, images, views, 3.0, previous)
-        assert decided_by == "previous"
-        np.testing.assert_allclose(out, previous, atol=1e-9)
-
-
-def test_a_fit_slid_along_its_circle_away_from_the_band_is_refused():
-    """The swage band marks the first 3 mm of the arc: a pose whose base lies 8 mm before the
-    seen band (its arc moved along the same circle) is refused, the right pose kept."""
-    import dataclasses
-
-    from suture_bt.transforms import make_transform
-
-    st = stereo(960, 540)
-    loc = NeedleLocalizer(st, net=_blind_net())
-    T = random_needle_pose(np.random.default_rng(3), 0.08, 0.12)
-    band = dataclasses.replace(loc.model, tip_angle=loc.model.base_angle - 0.003 / loc.model.radius)
-    images, views = [], []
-    for cam in (st.left, st.right):
-        Tc = invert(cam.T_world_cam) @ st.left.T_world_cam @ T
-        mask = rasterize_needle(cam, Tc, loc.model)
-        img = np.empty((540, 960, 3), np.uint8)
-        img[:] = (215, 140, 132)
-        img[mask] = (158, 161, 168)
-        img[rasterize_needle(cam, Tc, band)] = (150, 60, 170)
-        images.append(img)
-        views.append(MaskView(mask))
-    out, _, decided_by = loc._orient(T, images, views, 3.0, None)
-    assert decided_by == "colour"
-    np.testing.assert_allclose(out, T, atol=1e-9)
-    a = 0.008 / loc.model.radius
-    turn = np.array([[np.cos(a), -np.sin(a), 0.0], [np.sin(a), np.cos(a), 0.0], [0.0, 0.0, 1.0]])
-    with pytest.raises(NeedleNotFound, match="slid along the needle's circle"):
-        loc._orient(T @ make_transform(turn), images, views, 3.0, None)
-
-
-def test_an_end_counts_as_seen_only_on_or_next_to_the_mask():
-    from suture_bt.perception.needle_localizer import _on_mask
-
-    mask = np.zeros((20, 30), bool)
-    mask[10, 5:15] = True  # a 1-px line at full-image row 110, columns 205-214
-    view = MaskView(mask, (200, 100))
-    assert _on_mask(view, np.array([210.0, 110.0]), 2.0)
-    assert _on_mask(view, np.array([216.0, 110.0]), 2.0)  # 2 px past the last pixel
-    assert not _on_mask(view, np.array([217.5, 110.0]), 2.0)
-    assert not _on_mask(view, np.array([210.0, 107.0]), 2.0)
-    assert not _on_mask(view, np.array([50.0, 50.0]), 2.0)  # outside the crop
 
 
 def _task_scene(name: str, i: int, seed: int = 6173):

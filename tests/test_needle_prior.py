@@ -269,4 +269,3 @@ def test_seed_poses_pass_the_pinch_point_with_the_held_face_and_nearest_the_port
     near = seed_poses([held, jaws, port], MODEL)
     assert len(near) == 4 * SEED_PLACES
     assert min(port.miss(T, MODEL) for T in near) < 0.5
-

@@ -9,7 +9,8 @@
    shaft, the border, the tissue where the caller's tissue model says it can hide it), and
    no wire both eyes see may lie deep inside the known tissue; else a refusal.
 5. The outline cannot tell base from tip: the colour at the fitted ends (the violet swage band
-   at the base, :mod:`needle_ends`) does, else continuity with the previous estimate.
+   at the base, :mod:`needle_ends`; :mod:`base_or_tip`) does, else continuity with the previous
+   estimate or the holder's jaws.
 Only images and the calibrated camera model are used (no ground truth).
 """
 
@@ -18,7 +19,7 @@ from __future__ import annotations
 import os
 import time
 from collections.abc import Callable, Sequence
-from dataclasses import dataclass, field, replace
+from dataclasses import replace
 
 import cv2
 import numpy as np
@@ -26,6 +27,7 @@ import torch
 
 from suture_bt.geometry import NeedleModel
 from suture_bt.interfaces import StereoCameraModel
+from suture_bt.perception.base_or_tip import BaseTipChooser, occlusion_radius
 from suture_bt.perception.colour_refine import (
     ColourRule,
     coarse_components,
@@ -35,15 +37,8 @@ from suture_bt.perception.colour_refine import (
 )
 from suture_bt.perception.geodesic_ends import geodesic_ends
 from suture_bt.perception.mask_disparity import mask_disparity
-from suture_bt.perception.needle_ends import (
-    BAND_LENGTH,
-    MIN_EVIDENCE,
-    band_offset,
-    band_pixels,
-    base_evidence,
-    swapped,
-    with_band_pieces,
-)
+from suture_bt.perception.needle_ends import band_pixels, with_band_pieces
+from suture_bt.perception.needle_estimate import NeedleEstimate
 from suture_bt.perception.needle_prior import (
     AcrossJawsPrior,
     HeldPrior,
@@ -70,7 +65,6 @@ from suture_bt.perception.occlusion import (
     without_occluder_rims,
 )
 from suture_bt.perception.pose_fit import (
-    MaskView,
     NeedleNotFound,
     PoseFitResult,
     PoseFitter,
@@ -81,7 +75,6 @@ from suture_bt.perception.unseen_arc import (
     arc_exposure,
     below_port_planes,
 )
-from suture_bt.transforms import rotation_angle
 
 #: A keypoint heatmap peak below this probability is not trusted (the mask's ends are used).
 MIN_KEYPOINT_SCORE = 0.15
@@ -123,15 +116,6 @@ MIN_HALF_WIDTH_PX = 1.5
 #: Reach (in gate half-widths) within which a mask piece hugging an occluder counts as its rim
 #: (:func:`~suture_bt.perception.occlusion.without_occluder_rims`): 3 px for a wire 7 px wide.
 RIM_REACH = 0.6
-#: A fitted end whose pixel is farther than this from the needle mask is not seen: the fit put
-#: it behind something, and the grey wire leading up to it says nothing about which end it is.
-END_ON_MASK_PX = 2.0
-#: How far past a fitted end (m, along the circle) the wire is looked for inside the tissue,
-#: and how deep inside it must be there (m) for the end to count as cut by the tissue.
-CUT_PROBE, CUT_DEPTH = 0.002, 0.0003
-#: Farthest the seen swage band may start from the fitted base (m, along the arc): half a band
-#: length of slack past the band's own 3 mm.
-MAX_BAND_OFFSET = 1.5 * BAND_LENGTH
 #: A final fit whose predicted angle spread (deg; see
 #: :func:`~suture_bt.perception.pose_fit.pose_uncertainty`) exceeds this is refused: the seen
 #: piece of the needle leaves its plane, or its course behind an occluder, free.
@@ -159,46 +143,6 @@ MAX_EXPOSED_ONE_EYE = 0.006
 MAX_SEEN_INSIDE = 0.001
 
 
-@dataclass(frozen=True)
-class NeedleEstimate:
-    """The localiser's answer: pose (left camera and world), fit evidence and timings (ms)."""
-
-    T_cam_needle: np.ndarray
-    T_world_needle: np.ndarray
-    rms_px: float
-    inlier_fraction: float
-    ambiguity: float
-    keypoints_left: np.ndarray
-    keypoint_scores: np.ndarray
-    #: Colour vote for the base↔tip choice (> 0 kept, < 0 swapped) and what decided it:
-    #: "colour" (the swage band), "previous" (the nearer of the two to the previous estimate)
-    #: or "jaws" (the face a holder's jaws hold it by: :class:`AcrossJawsPrior`).
-    end_evidence: float
-    end_decided_by: str
-    timings_ms: dict
-    fit: PoseFitResult = field(repr=False)
-    masks: tuple[MaskView, MaskView] = field(repr=False)
-    #: The task priors the answer was checked against (:mod:`needle_prior`; empty: none).
-    priors: tuple = ()
-    #: Where the model arc lies unseen and unhidden, per eye (:mod:`unseen_arc`).
-    exposure: ArcExposure | None = field(default=None, repr=False)
-
-    @property
-    def angle_std_deg(self) -> float:
-        """Predicted angle spread of the pose (deg): how loosely the seen outline pins it."""
-        return self.fit.angle_std_deg
-
-    @property
-    def position_std_mm(self) -> float:
-        """Predicted spread of the arc centre (mm)."""
-        return self.fit.position_std_mm
-
-    @property
-    def confidence(self) -> float:
-        """0..1: share of edge points explained, discounted for large residuals."""
-        return float(self.inlier_fraction / (1.0 + max(self.rms_px - 0.5, 0.0)))
-
-
 def _net_input(rgb: np.ndarray, width: int) -> tuple[np.ndarray, float]:
     """Area-downsample to ``width`` (aspect kept), pad rows to a multiple of 16; scale."""
     H, W = rgb.shape[:2]
@@ -209,11 +153,6 @@ def _net_input(rgb: np.ndarray, width: int) -> tuple[np.ndarray, float]:
     if hp != h:
         small = np.concatenate([small, np.zeros((hp - h, width, 3), small.dtype)], 0)
     return small, s
-
-
-def _occlusion_radius(half_width: float) -> float:
-    """How far (px) around an end pixel an occluder is looked for: the wire's width and a bit."""
-    return 2.0 * half_width + 3.0
 
 
 def _same_pair(a, b, tol_px: float = 3.0) -> bool:
@@ -267,6 +206,7 @@ class NeedleLocalizer:
         self.max_angle_std_deg = max_angle_std_deg
         self.max_angle_std_deg_held = max_angle_std_deg_held
         self.tissue = tissue
+        self.base_tip = BaseTipChooser(stereo, self.model, self.rule, tissue)
         self.max_exposed = max_exposed
         self.fitter = PoseFitter(stereo, self.model, depth_range=(MIN_DEPTH, MAX_DEPTH))
         self.input_width = INPUT_SIZE[0]
@@ -383,7 +323,7 @@ class NeedleLocalizer:
         exposure = self._exposure((left, right), views, fit.T_cam_needle, priors)
         t3 = time.perf_counter()
         jaws = [p for p in priors if isinstance(p, AcrossJawsPrior)]
-        T_cam, evidence, decided_by = self._orient(
+        T_cam, evidence, decided_by = self.base_tip.orient(
             fit.T_cam_needle, (left, right), views, half_width, previous, jaws
         )
         check_orientation(predicted, self.stereo.left.T_world_cam @ T_cam, decided_by)
@@ -554,7 +494,7 @@ class NeedleLocalizer:
         """
         left = images[0]
         visible_ends = ends if ends is not None else mask_ends(views[0])
-        radius = _occlusion_radius(half_width)
+        radius = occlusion_radius(half_width)
         occluded = tuple(
             end_is_occluded(left, views[0], e, radius, self.rule) for e in visible_ends
         )
@@ -647,84 +587,3 @@ class NeedleLocalizer:
             if pinned
             else (self.max_angle_std_deg)
         )
-
-    def _ends_in_tissue(self, T_cam: np.ndarray) -> tuple[bool, bool]:
-        """(base, tip): whether the circle continued CUT_PROBE past that fitted end runs into
-        the known tissue (a needle in a port: the wire may go on inside, and the grey where
-        the fit ends it is not its tip). (False, False) without a tissue model."""
-        if self.tissue is None:
-            return False, False
-        m, T = self.model, self.stereo.left.T_world_cam @ T_cam
-        step = CUT_PROBE / m.radius
-        past = m.point_at(np.array([m.base_angle + step, m.tip_angle - step]))
-        world = past @ T[:3, :3].T + T[:3, 3]
-        inside = self.tissue(world, margin=CUT_DEPTH)
-        return bool(inside[0]), bool(inside[1])
-
-    def _orient(self, T_cam: np.ndarray, images, views, half_width: float, previous, jaws=()):
-        """Base↔tip choice: the swage band's colour, else continuity with ``previous``, else
-        the holder's jaws (``jaws``: :class:`AcrossJawsPrior`, the needle's face as held);
-        with none, NeedleNotFound: a swapped needle sends the grasp and the insertion to the
-        wrong end.
-
-        A fitted end that touches an occluder may hide the band, and one off the mask is not
-        seen at all: the grey there does not vote.
-        (The network's base keypoint used to decide when the band did not: over the 600 scenes
-        of the 1080p benchmark sets it was right for 4 of the 12 needles it decided.)
-        """
-        radius = _occlusion_radius(half_width)
-
-        def end_hidden(eye: int, uv: np.ndarray) -> bool:
-            return not _on_mask(views[eye], uv, END_ON_MASK_PX) or end_is_occluded(
-                images[eye], views[eye], uv, radius, self.rule
-            )
-
-        cams = (self.stereo.left, self.stereo.right)
-        evidence = base_evidence(
-            images,
-            tuple(views),
-            cams,
-            T_cam,
-            self.model,
-            end_hidden=end_hidden,
-            ends_cut=self._ends_in_tissue(T_cam),
-        )
-        if abs(evidence) >= MIN_EVIDENCE:
-            T_cam = T_cam if evidence > 0 else swapped(T_cam, self.model)
-            offset = band_offset(images, tuple(views), cams, T_cam, self.model)
-            if offset is not None and offset > MAX_BAND_OFFSET:
-                raise NeedleNotFound(
-                    f"the swage band starts {1e3 * offset:.1f} mm from the fitted base (it "
-                    f"covers the first {1e3 * BAND_LENGTH:.0f} mm): the fit slid along the "
-                    "needle's circle"
-                )
-            return T_cam, evidence, "colour"
-        if previous is not None:
-            other = swapped(T_cam, self.model)
-            prev = np.asarray(previous, float)[:3, :3]
-            keep = rotation_angle(prev, T_cam[:3, :3]) <= rotation_angle(prev, other[:3, :3])
-            return (T_cam if keep else other), evidence, "previous"
-        if jaws:
-            other = swapped(T_cam, self.model)
-            to_world = self.stereo.left.T_world_cam
-            keep = jaws[0].facing(to_world @ T_cam, to_world @ other)
-            return (T_cam if keep else other), evidence, "jaws"
-        raise NeedleNotFound(
-            "which end is the base cannot be told: the swage band shows at neither fitted end "
-            f"(colour evidence {evidence:+.2f}, needs ±{MIN_EVIDENCE:.2f}) and there is no "
-            "previous estimate to follow"
-        )
-
-
-def _on_mask(view: MaskView, uv: np.ndarray, tol_px: float) -> bool:
-    """Whether a needle-mask pixel lies within ``tol_px`` of the full-image pixel ``uv``."""
-    x0, y0 = view.origin
-    u, v = float(uv[0]) - x0, float(uv[1]) - y0
-    r = int(np.ceil(tol_px))
-    h, w = view.mask.shape
-    a, b = max(int(np.floor(u)) - r, 0), min(int(np.floor(u)) + r + 2, w)
-    c, d = max(int(np.floor(v)) - r, 0), min(int(np.floor(v)) + r + 2, h)
-    if a >= b or c >= d:
-        return False
-    yy, xx = np.nonzero(view.mask[c:d, a:b])
-    return bool(np.any((xx + a - u) ** 2 + (yy + c - v) ** 2 <= tol_px**2))
