@@ -72,6 +72,8 @@ def test_between_near_tied_twins_the_prior_not_the_cost_decides():
     assert pose_errors(free.T_cam_needle, T)[0] < 1.0
     twin = next(c for c in free.candidates if pose_errors(c, T)[0] > 10.0)
     assert free.ambiguity < 0.1 * free.cost
+    assert len(free.candidate_costs) == len(free.candidates)
+    assert min(free.candidate_costs) == pytest.approx(free.cost)
     on_twin = HeldPrior("psm1", _arc_point(_world(st, twin), 2.0), tolerance=0.002)
     res = PoseFitter(st, MODEL).fit(*occ, short, priors=[on_twin], **kw)
     assert pose_errors(res.T_cam_needle, twin)[0] < 0.5 and res.cost > free.cost

@@ -98,7 +98,7 @@ MAX_RMS_PX = 0.45
 #: object (one was 117 mm off), and the 64-68 % ones there wrong (one 160 deg off).
 MIN_INLIER_FRACTION = 0.7
 #: Nearest needle distance considered (m): the working range's floor. The Task 3 start holds
-#: the needle 29-48 mm from the left eye, a needle in a port is 45-100 mm away.
+#: the needle 27-50 mm from the left eye; a needle in a port is 47-93 mm away.
 MIN_DEPTH = 0.02
 #: The nearest distance (m) assumed where no stereo depth says otherwise: the widest wire, the
 #: farthest apart two end keypoints or two mask pieces of one needle can be. Assuming the
@@ -582,8 +582,6 @@ class NeedleLocalizer:
         point of the arc to the jaw within HELD_PIN_TOLERANCE (the spread is the image's
         alone, and the prior has already chosen among the candidates)."""
         pinned = any(isinstance(p, HeldPrior) and p.tolerance <= HELD_PIN_TOLERANCE for p in priors)
-        return (
-            max(self.max_angle_std_deg, self.max_angle_std_deg_held)
-            if pinned
-            else (self.max_angle_std_deg)
-        )
+        if not pinned:
+            return self.max_angle_std_deg
+        return max(self.max_angle_std_deg, self.max_angle_std_deg_held)
