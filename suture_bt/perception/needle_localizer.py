@@ -442,7 +442,7 @@ class NeedleLocalizer:
         if depth is not None and mask_depth is not None:
             if abs(depth / mask_depth - 1.0) > DEPTH_AGREEMENT:
                 # Keypoints matched wrongly between the eyes (one on a jaw tip): the masks'
-                # depth stands, unless the keypoints' is the working floor's kind of near.
+                # depth stands alone.
                 depth = None
                 depths = [mask_depth]
         # The nearest the needle can be: the widest it can look.
