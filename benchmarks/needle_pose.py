@@ -50,7 +50,7 @@ from suture_bt.perception.needle_localizer import MAX_ANGLE_STD_DEG, NeedleLocal
 from suture_bt.perception.needle_prior import HeldPrior, PortPrior, arc_distance
 from suture_bt.perception.needle_projection import rasterize_needle
 from suture_bt.perception.pose_fit import NeedleNotFound
-from suture_bt.perception.unseen_arc import tissue_model
+from suture_bt.perception.unseen_arc import phantom_tissue
 from suture_bt.transforms import invert
 
 HELD_OUT_SEED = 1000
@@ -111,9 +111,6 @@ def _draw_scene(sim: SimScene, cond: str, rng, i: int):
     raise RuntimeError(f"no {cond} scene in {MAX_SCENE_ATTEMPTS} draws (scene {i})")
 
 
-#: The phantom's tissue block footprint ((x0, x1), (y0, y1), phantom frame; the scene's known
-#: geometry, sim/phantom_body.py), for the localiser's tissue model.
-BLOCK = ((-0.045, 0.045), (-0.055, 0.075))
 #: Tolerances (m) of the benchmark's priors: held (exact joints) and in a port.
 HELD_PRIOR_TOL = 0.001
 PORT_PRIOR_TOL = 0.003
@@ -338,13 +335,12 @@ def run(
     torch.set_num_threads(threads)
     sim = SimScene(width, height)
     ph = sim.world.task.phantom
-    pairs = [tuple((p.position, p.normal) for p in ph.pair(k)) for k in range(1, ph.num_pairs + 1)]
     kw = {} if max_exposed is None else {"max_exposed": max_exposed}
     loc = NeedleLocalizer(
         sim.stereo,
         weights=weights,
         max_angle_std_deg=max_angle_std_deg,
-        tissue=tissue_model(ph.T_world_phantom, pairs, sim.stereo.left.T_world_cam[:3, 3], BLOCK),
+        tissue=phantom_tissue(ph, sim.stereo.left.T_world_cam[:3, 3]),
         **kw,
     )
     # The needle's 180° symmetry about its bisector (base ↔ tip) as a rotation in its frame.

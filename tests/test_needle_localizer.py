@@ -153,7 +153,7 @@ def _task_scene(name: str, i: int, seed: int = 6173):
     import needle_task_scenes
 
     from suture_bt.datagen.needle_data import SimScene
-    from suture_bt.perception.unseen_arc import tissue_model
+    from suture_bt.perception.unseen_arc import phantom_tissue
 
     sim = SimScene(1920, 1080)
     try:
@@ -163,9 +163,8 @@ def _task_scene(name: str, i: int, seed: int = 6173):
         left, _ = sim.render("left", s, rng)
         right, _ = sim.render("right", s, rng)
         ph = sim.world.task.phantom
-        pairs = [tuple((p.position, p.normal) for p in ph.pair(k)) for k in range(1, 5)]
         eye = sim.stereo.left.T_world_cam[:3, 3]
-        tissue = tissue_model(ph.T_world_phantom, pairs, eye, needle_pose.BLOCK)
+        tissue = phantom_tissue(ph, eye)
         T_true = invert(sim.stereo.left.T_world_cam) @ s.T_world_needle
         return sim.stereo, left, right, T_true, priors, tissue
     finally:

@@ -173,7 +173,7 @@ def test_localizer_refuses_the_mirror_twin_of_the_held_needle_at_the_task3_start
     from suture_bt.perception import needle_localizer
     from suture_bt.perception.needle_localizer import NeedleLocalizer
     from suture_bt.perception.pose_fit import NeedleNotFound
-    from suture_bt.perception.unseen_arc import tissue_model
+    from suture_bt.perception.unseen_arc import phantom_tissue
 
     monkeypatch.setattr(needle_localizer, "MIN_DEPTH", 0.05)
     sim = SimScene(1920, 1080)
@@ -185,9 +185,8 @@ def test_localizer_refuses_the_mirror_twin_of_the_held_needle_at_the_task3_start
         left, _ = sim.render("left", s, rng)
         right, _ = sim.render("right", s, rng)
         ph = sim.world.task.phantom
-        pairs = [tuple((p.position, p.normal) for p in ph.pair(k)) for k in range(1, 5)]
         eye = sim.stereo.left.T_world_cam[:3, 3]
-        tissue = tissue_model(ph.T_world_phantom, pairs, eye, needle_pose.BLOCK)
+        tissue = phantom_tissue(ph, eye)
         with pytest.raises(NeedleNotFound, match="hidden by nothing"):
             NeedleLocalizer(sim.stereo, tissue=tissue).localize(left, right)
     finally:

@@ -29,7 +29,7 @@ import cv2
 import numpy as np
 
 from suture_bt.geometry import NeedleModel
-from suture_bt.geometry.phantom import TISSUE_TOP_Z
+from suture_bt.geometry.phantom import TISSUE_TOP_Z, TISSUE_X, TISSUE_Y
 from suture_bt.interfaces import StereoCameraModel
 from suture_bt.perception.colour_refine import ColourRule, needle_coloured
 from suture_bt.perception.mask_view import MaskView
@@ -239,6 +239,17 @@ def tissue_model(
         return solid(ray.reshape(-1, 3), 0.0).reshape(len(w), -1).any(1)
 
     return inside
+
+
+def phantom_tissue(phantom, eye: np.ndarray) -> Callable[..., np.ndarray]:
+    """:func:`tissue_model` of the task's known phantom (a
+    :class:`~suture_bt.geometry.PhantomModel`: its pose, port pairs and block) seen from
+    ``eye`` (world): the localiser's ``tissue``."""
+    pairs = [
+        tuple((p.position, p.normal) for p in phantom.pair(k))
+        for k in range(1, phantom.num_pairs + 1)
+    ]
+    return tissue_model(phantom.T_world_phantom, pairs, eye, (TISSUE_X, TISSUE_Y))
 
 
 #: How far back along the line of sight (m) and in how many steps the tissue is looked for.
