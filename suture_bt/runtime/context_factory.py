@@ -7,8 +7,6 @@ simulator is reachable from what it returns (``tests/test_context_factory.py`` w
 from __future__ import annotations
 
 from suture_bt.control import PIServo
-from suture_bt.perception.needle_localizer import NeedleLocalizer
-from suture_bt.perception.unseen_arc import phantom_tissue
 from suture_bt.runtime.views import views_of
 from suture_bt.skills.context import ArmHandle, TaskContext
 from suture_bt.skills.needle_sensor import VisionNeedleSensor
@@ -16,9 +14,7 @@ from suture_bt.skills.needle_sensor import VisionNeedleSensor
 
 def build_context(world, oracle: bool = False, localizer=None) -> TaskContext:
     """Views of the world's arms, camera and clock, a PI servo per arm run by the world at
-    200 Hz, and the vision needle sensor (or, with ``oracle``, the labelled ground-truth one).
-    The sensor's localiser (unless one is given) knows the task's phantom: the tissue hides a
-    needle only where the phantom can (:func:`~suture_bt.perception.unseen_arc.phantom_tissue`)."""
+    200 Hz, and the vision needle sensor (or, with ``oracle``, the labelled ground-truth one)."""
     views = views_of(world)
     arms = {}
     for name, view in views.arms.items():
@@ -31,10 +27,6 @@ def build_context(world, oracle: bool = False, localizer=None) -> TaskContext:
 
         sensor, offsets = OracleNeedleSensor(world, views.clock), offset_oracle(world)
     else:
-        if localizer is None:
-            eye = views.camera.model.left.T_world_cam[:3, 3]
-            tissue = phantom_tissue(world.task.phantom, eye)
-            localizer = NeedleLocalizer(views.camera.model, tissue=tissue)
         sensor, offsets = VisionNeedleSensor(views.camera, localizer), None
     return TaskContext(
         arms=arms,
