@@ -21,7 +21,7 @@ again with the task priors a caller knows there (reported as ``SET+prior``). ``w
 answers ≥ 2 mm or ≥ 5° off over all scenes; ``wall_ms_p95`` = p95 wall time of a localiser
 call per stereo frame, refusals included.
 
-The localiser is given the task's known phantom as its tissue model (``unseen_arc.tissue_model``:
+The localiser is given the task's known phantom as its tissue model (``unseen_arc.phantom_tissue``:
 the block's top and footprint, the ridge under the port pairs), so the tissue hides the needle
 only where it can (``--max-exposed-mm inf`` turns the unseen-part check off).
 
