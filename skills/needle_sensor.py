@@ -123,7 +123,7 @@ class VisionNeedleSensor:
         except NeedleNotFound as exc:
             best = getattr(exc, "best", None)
             if best is not None:
-                best = np.linalg.inv(T_cam_world) @ best
+                best = self.camera.model.left.T_world_cam @ best
             self.last_refused = best
             raise NeedleNotSeen(str(exc), getattr(exc, "unseen_eye", None), best) from exc
         finally:

@@ -1,4 +1,5 @@
-"""Shared synthetic-scene helpers for the perception tests (no simulator needed)."""
+"""Shared scene helpers for the perception tests: synthetic ones (no simulator), and the
+needle benchmark's task scenes rendered in the simulator (:func:`task_scene`)."""
 
 from __future__ import annotations
 
@@ -38,3 +39,34 @@ def pose_errors(Ta: np.ndarray, Tb: np.ndarray) -> tuple[float, float]:
     pos = float(np.linalg.norm(Ta[:3, 3] - Tb[:3, 3]) * 1e3)
     ang = float(np.degrees(Rotation.from_matrix(Ta[:3, :3].T @ Tb[:3, :3]).magnitude()))
     return pos, ang
+
+
+def task_scene(name: str, i: int, seed: int = 6173):
+    """Development scene ``i`` of the needle benchmark's task set ``name`` (seed 6173, the
+    tuning seed) rendered in the simulator: (stereo model, left, right, true T_cam_needle, task
+    priors, the phantom's tissue model)."""
+    import sys
+    from pathlib import Path
+
+    sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "benchmarks"))
+    import needle_pose
+    import needle_task_scenes
+
+    from suture_bt.datagen.needle_data import SimScene
+    from suture_bt.perception.unseen_arc import phantom_tissue
+    from suture_bt.transforms import invert
+
+    sim = SimScene(1920, 1080)
+    try:
+        rng = np.random.default_rng([seed, needle_pose.SETS.index(name), i])
+        s, priors = needle_task_scenes.BUILDERS[name](sim, rng)
+        sim.apply(s)
+        left, _ = sim.render("left", s, rng)
+        right, _ = sim.render("right", s, rng)
+        ph = sim.world.task.phantom
+        eye = sim.stereo.left.T_world_cam[:3, 3]
+        tissue = phantom_tissue(ph, eye)
+        T_true = invert(sim.stereo.left.T_world_cam) @ s.T_world_needle
+        return sim.stereo, left, right, T_true, priors, tissue
+    finally:
+        sim.close()

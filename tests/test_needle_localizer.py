@@ -4,7 +4,7 @@ bad inputs a clear ValueError, and (with the shipped weights) a rendered needle 
 import numpy as np
 import pytest
 import torch
-from perception_helpers import pose_errors, stereo
+from perception_helpers import pose_errors, stereo, task_scene
 
 from suture_bt.perception.needle_localizer import NeedleLocalizer
 from suture_bt.perception.network import DEFAULT_WEIGHTS, NeedleNet
@@ -55,7 +55,6 @@ def test_shipped_network_localizes_a_rendered_needle(monkeypatch):
     if not DEFAULT_WEIGHTS.is_file():
         pytest.fail(f"shipped weights missing: {DEFAULT_WEIGHTS}")
     from suture_bt.datagen.needle_data import SimScene
-    from suture_bt.transforms import invert
 
     sim = SimScene(960, 540)
     try:
@@ -142,35 +141,6 @@ def test_keypoints_farther_apart_than_the_needle_can_appear_keep_only_the_strong
     np.testing.assert_array_equal(loc._plausible(kp, far_weak), far_weak)
 
 
-def _task_scene(name: str, i: int, seed: int = 6173):
-    """Development scene ``i`` of the needle benchmark's task set ``name`` (seed 6173, the
-    tuning seed): (stereo model, left, right, true T_cam_needle, task priors, tissue model)."""
-    import sys
-    from pathlib import Path
-
-    sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "benchmarks"))
-    import needle_pose
-    import needle_task_scenes
-
-    from suture_bt.datagen.needle_data import SimScene
-    from suture_bt.perception.unseen_arc import phantom_tissue
-
-    sim = SimScene(1920, 1080)
-    try:
-        rng = np.random.default_rng([seed, needle_pose.SETS.index(name), i])
-        s, priors = needle_task_scenes.BUILDERS[name](sim, rng)
-        sim.apply(s)
-        left, _ = sim.render("left", s, rng)
-        right, _ = sim.render("right", s, rng)
-        ph = sim.world.task.phantom
-        eye = sim.stereo.left.T_world_cam[:3, 3]
-        tissue = phantom_tissue(ph, eye)
-        T_true = invert(sim.stereo.left.T_world_cam) @ s.T_world_needle
-        return sim.stereo, left, right, T_true, priors, tissue
-    finally:
-        sim.close()
-
-
 def test_a_held_needle_30_mm_from_the_cameras_is_localised(monkeypatch):
     """The Task 3 start holds the needle 27-50 mm from the left eye, nearly edge-on (the
     working floor was 50 mm: every such view was refused). Scene 19 (29 mm) is answered
@@ -180,13 +150,13 @@ def test_a_held_needle_30_mm_from_the_cameras_is_localised(monkeypatch):
     from suture_bt.perception import needle_localizer
     from suture_bt.perception.needle_prior import PriorContradicted
 
-    stereo_model, left, right, T, priors, tissue = _task_scene("held_start", 19)
+    stereo_model, left, right, T, priors, tissue = task_scene("held_start", 19)
     loc = NeedleLocalizer(stereo_model, tissue=tissue)
     est = loc.localize(left, right)
     assert T[2, 3] < 0.03
     pos, ang = pose_errors(est.T_cam_needle, T)
     assert pos < 0.5 and ang < 2.0
-    stereo_model, left, right, T, priors, tissue = _task_scene("held_start", 3)
+    stereo_model, left, right, T, priors, tissue = task_scene("held_start", 3)
     loc = NeedleLocalizer(stereo_model, tissue=tissue)
     pos, ang = pose_errors(loc.localize(left, right, priors=priors).T_cam_needle, T)
     assert pos < 0.5 and ang < 2.0
@@ -200,7 +170,7 @@ def test_grey_where_the_wire_goes_into_the_tissue_does_not_say_tip():
     the tissue past the entry): the fitted end where the wire goes into the tissue is not its
     tip. That grey used to vote "tip here" and the answer was the needle with base and tip
     swapped (180 deg off); now it is the needle or a refusal."""
-    stereo_model, left, right, T, priors, tissue = _task_scene("in_port", 15)
+    stereo_model, left, right, T, priors, tissue = task_scene("in_port", 15)
     loc = NeedleLocalizer(stereo_model, tissue=tissue)
     try:
         est = loc.localize(left, right)

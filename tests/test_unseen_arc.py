@@ -160,34 +160,14 @@ def test_localizer_refuses_the_mirror_twin_of_the_held_needle_at_the_task3_start
     front of which the needle is held. With the task's tissue model that is a refusal naming
     it (without one, any tissue-coloured pixel may hide the needle and this twin is not
     caught). The floor is 20 mm now, and the needle's own pose is found."""
-    import sys
-    from pathlib import Path
-
     import pytest
+    from perception_helpers import task_scene
 
-    sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "benchmarks"))
-    import needle_pose
-    import needle_task_scenes
-
-    from suture_bt.datagen.needle_data import SimScene
     from suture_bt.perception import needle_localizer
     from suture_bt.perception.needle_localizer import NeedleLocalizer
     from suture_bt.perception.pose_fit import NeedleNotFound
-    from suture_bt.perception.unseen_arc import phantom_tissue
 
     monkeypatch.setattr(needle_localizer, "MIN_DEPTH", 0.05)
-    sim = SimScene(1920, 1080)
-    try:
-        ci = needle_pose.SETS.index("held_start")
-        rng = np.random.default_rng([6173, ci, 6])
-        s, _ = needle_task_scenes.held_start(sim, rng)
-        sim.apply(s)
-        left, _ = sim.render("left", s, rng)
-        right, _ = sim.render("right", s, rng)
-        ph = sim.world.task.phantom
-        eye = sim.stereo.left.T_world_cam[:3, 3]
-        tissue = phantom_tissue(ph, eye)
-        with pytest.raises(NeedleNotFound, match="hidden by nothing"):
-            NeedleLocalizer(sim.stereo, tissue=tissue).localize(left, right)
-    finally:
-        sim.close()
+    stereo_model, left, right, _, _, tissue = task_scene("held_start", 6)
+    with pytest.raises(NeedleNotFound, match="hidden by nothing"):
+        NeedleLocalizer(stereo_model, tissue=tissue).localize(left, right)

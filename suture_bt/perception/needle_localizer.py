@@ -206,7 +206,6 @@ class NeedleLocalizer:
         self.max_angle_std_deg = max_angle_std_deg
         self.max_angle_std_deg_held = max_angle_std_deg_held
         self.tissue = tissue
-        self.base_tip = BaseTipChooser(stereo, self.model, self.rule, tissue)
         self.max_exposed = max_exposed
         self.fitter = PoseFitter(stereo, self.model, depth_range=(MIN_DEPTH, MAX_DEPTH))
         self.input_width = INPUT_SIZE[0]
@@ -214,6 +213,11 @@ class NeedleLocalizer:
         #: The last call's network output (coarse probabilities, scale), kept whether or not
         #: it answered: a refusal still says where in the images needle was seen.
         self.last_network: tuple[np.ndarray, float] | None = None
+
+    @property
+    def base_tip(self) -> BaseTipChooser:
+        """The base-or-tip choice with this localiser's cameras, model, rule and tissue."""
+        return BaseTipChooser(self.stereo, self.model, self.rule, self.tissue)
 
     def network(self, left: np.ndarray, right: np.ndarray):
         """Coarse mask probabilities (2, h, w), keypoints (2, 2, 2) in full-res px, scores."""
