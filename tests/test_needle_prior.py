@@ -76,10 +76,14 @@ def test_between_near_tied_twins_the_prior_not_the_cost_decides():
     assert min(free.candidate_costs) == pytest.approx(free.cost)
     on_twin = HeldPrior("psm1", _arc_point(_world(st, twin), 2.0), tolerance=0.002)
     res = PoseFitter(st, MODEL).fit(*occ, short, priors=[on_twin], **kw)
-    assert pose_errors(res.T_cam_needle, twin)[0] < 0.5 and res.cost > free.cost
+    assert pose_errors(res.T_cam_needle, twin)[0] < 0.5
     on_needle = HeldPrior("psm1", _arc_point(_world(st, T), 2.0), tolerance=0.002)
     res = PoseFitter(st, MODEL).fit(*occ, short, priors=[on_needle], **kw)
-    np.testing.assert_allclose(res.T_cam_needle, free.T_cam_needle)
+    # The same candidate, its loosely seen pose pulled towards the needle by the prior's soft
+    # term (prior_term): 0.54 mm / 3.5 deg off without the prior, 0.36 mm / 2.3 deg with it.
+    assert pose_errors(res.T_cam_needle, free.T_cam_needle)[0] < 0.5
+    with_prior, without = pose_errors(res.T_cam_needle, T), pose_errors(free.T_cam_needle, T)
+    assert with_prior[0] < without[0] and with_prior[1] < without[1]
 
 
 def test_port_and_predicted_pose_priors_choose_the_right_twin():

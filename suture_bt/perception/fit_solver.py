@@ -13,6 +13,7 @@ from suture_bt.perception.edge_residuals import (
     residuals_and_geometry,
 )
 from suture_bt.perception.needle_projection import params_to_pose
+from suture_bt.perception.prior_term import PriorTerm, prior_information
 
 #: Finite-difference steps of the six parameters (px, px, px, px, rad, rad) for the pose's
 #: derivatives and the extra terms' (the edge residuals' derivatives are analytic).
@@ -155,21 +156,24 @@ def pose_uncertainty(
     model: NeedleModel,
     sigma: float = 1.0,
     loss: str = "geman_mcclure",
+    prior: PriorTerm | None = None,
 ) -> tuple[float, float]:
     """Predicted spread of a fitted pose: (angle std in degrees, arc-centre std in mm).
 
-    The Gauss-Newton covariance s²·(Jᵀ W J)⁻¹ of the robust edge fit at parameters ``x``
-    (W the loss's IRLS weights, s² their weighted residual variance), carried to the needle
-    frame's rotation and origin. It is large where the seen outline leaves the pose free: a
-    short, nearly straight visible piece fixes neither the arc's plane nor how it goes on behind
-    an occluder. Neighbouring edge residuals are treated as independent (they are not), so it
-    ranks views by how firmly they pin the pose; it is not a calibrated standard deviation.
+    The Gauss-Newton covariance (Jᵀ W J / s² + I_prior)⁻¹ of the robust edge fit at
+    parameters ``x`` (W the loss's IRLS weights, s² their weighted residual variance; I_prior
+    the task priors' information, :func:`~suture_bt.perception.prior_term.prior_information`,
+    when ``prior`` is given), carried to the needle frame's rotation and origin. It is large
+    where the seen outline (and the priors) leave the pose free: a short, nearly straight
+    visible piece fixes neither the arc's plane nor how it goes on behind an occluder.
+    Neighbouring edge residuals are treated as independent (they are not), so it ranks views
+    by how firmly they pin the pose; it is not a calibrated standard deviation.
     """
     cam = stereo.left
     x = np.asarray(x, dtype=float)[None]
     T = params_to_pose(x, cam, model)
     r, theta = residuals(T, rays, model)
-    _, dT = _pose_derivatives(x, T, cam, model)
+    T6, dT = _pose_derivatives(x, T, cam, model)
     J = edge_jacobian(T, dT, rays, model, theta)[0]
     r = r[0]
     ok = np.isfinite(r) & np.isfinite(J).all(0)
@@ -178,7 +182,8 @@ def pose_uncertainty(
     J, r = J[:, ok], r[ok]
     w = _irls_weights(r, sigma, loss)
     s2 = float((w * r * r).sum() / max(w.sum() - len(FD_STEPS), 1.0))
-    cov = s2 * np.linalg.pinv((J * w) @ J.T)
+    info = (J * w) @ J.T / s2 + prior_information(prior, T[0], T6[0], FD_STEPS)
+    cov = np.linalg.pinv(info)
     # Per parameter: the small rotation R0ᵀ dR (the axial vector of its skew part) and the
     # origin's shift.
     S = np.einsum("ji,kjl->kil", T[0, :3, :3], dT[0, :, :3, :3])

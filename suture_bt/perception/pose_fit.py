@@ -58,6 +58,7 @@ from suture_bt.perception.needle_projection import (
     phi_from_base_depth,
     pose_to_params,
 )
+from suture_bt.perception.prior_term import PriorTerm
 from suture_bt.perception.refusal import NeedleNotFound
 
 #: A clearly different second-stage pose costing at most this much more than the best also
@@ -138,6 +139,9 @@ class PoseFitter:
     #: Working distance (m) of the arc centre from the left camera: fits outside are rejected
     #: (a short visible piece is also explained by a much nearer, larger-looking needle).
     depth_range: tuple[float, float] = (0.03, 0.5)
+    #: Whether the priors' points (pinch, port) join the polish as a soft term and the
+    #: predicted spread (:mod:`prior_term`).
+    prior_polish: bool = True
 
     def fit(
         self,
@@ -265,6 +269,9 @@ class PoseFitter:
         if priors:
             finals = self._with_consistent(finals, x, c, priors)
         polish = [t for t in terms if t.polish]
+        prior_term = PriorTerm(priors, cam.T_cam_world, self.model) if self.prior_polish else None
+        if prior_term:
+            polish.append(prior_term)
         xf, cf = levenberg_marquardt(
             x[finals], rays, self.stereo, self.model, it3, 1.0, polish, self.final_loss
         )
@@ -288,7 +295,7 @@ class PoseFitter:
         rms = float(np.sqrt(np.mean(r[inl] ** 2))) if inl.any() else float("inf")
         amb = float(np.min(np.delete(cf, b)) - cf[b]) if len(cf) > 1 else float("inf")
         ang_std, pos_std = pose_uncertainty(
-            xf[b], rays, self.stereo, self.model, 1.0, self.final_loss
+            xf[b], rays, self.stereo, self.model, 1.0, self.final_loss, prior_term
         )
         return PoseFitResult(
             T_cam_needle=T,
