@@ -3,7 +3,8 @@
 Every mask edge point back-projects to a ray that should be tangent to the wire: its distance
 to the centre-line arc should be the wire radius (rays past either end measure to the end
 point, the hemispherical cap). Residuals in pixels at the point's depth, and their analytic
-Jacobian in the pose.
+Jacobian in the pose. The fit's inner loop runs the same arithmetic compiled
+(:mod:`edge_kernel`); these numpy functions serve single evaluations and are its reference.
 """
 
 from __future__ import annotations

@@ -6,12 +6,8 @@ import numpy as np
 
 from suture_bt.geometry import NeedleModel
 from suture_bt.interfaces import StereoCameraModel
-from suture_bt.perception.edge_residuals import (
-    EdgeRays,
-    edge_jacobian,
-    residuals,
-    residuals_and_geometry,
-)
+from suture_bt.perception.edge_kernel import edge_normal_equations
+from suture_bt.perception.edge_residuals import EdgeRays, edge_jacobian, residuals
 from suture_bt.perception.needle_projection import params_to_pose
 from suture_bt.perception.prior_term import PriorTerm, prior_information
 
@@ -67,13 +63,15 @@ def levenberg_marquardt(
 
     ``extra`` (a term or a list of terms: ``term(T) -> (K, M)`` residuals in px, and
     ``term.column_weights(n_edge)``) adds residuals (free space, keypoint prior) to the edge
-    residuals.
+    residuals. The edge residuals and their normal equations come from the compiled loop
+    (:mod:`edge_kernel`); the extra terms' derivatives are finite differences.
     """
     x = np.array(x, dtype=float)
     cam = stereo.left
     extras = [e for e in (extra if isinstance(extra, list | tuple) else [extra]) if e]
-    colw = np.concatenate([np.ones(len(rays))] + [e.column_weights(len(rays)) for e in extras])
     K, n_edge = len(x), len(rays)
+    extra_w = np.concatenate([e.column_weights(n_edge) for e in extras]) if extras else None
+    colw = np.concatenate([np.ones(n_edge)] + ([extra_w] if extras else []))
 
     def extra_residuals(T):
         return np.concatenate([e(T) for e in extras], 1)
@@ -83,40 +81,38 @@ def levenberg_marquardt(
         pose's bits do not depend on its batch): (K, 4, 4), (K, 6, 4, 4), and the extra
         terms' residuals at the stepped poses (K, 6, M) (None without extra terms)."""
         P = params_to_pose(x[:, None, :] + _STEPS[None], cam, model)
-        n_extra = len(colw) - n_edge
-        E6 = extra_residuals(P[:, 1:].reshape(-1, 4, 4)).reshape(K, 6, n_extra) if extras else None
+        E6 = extra_residuals(P[:, 1:].reshape(-1, 4, 4)).reshape(K, 6, -1) if extras else None
         return np.ascontiguousarray(P[:, 0]), P[:, 1:], E6
 
-    def both(T, *a, **k):
-        r, th, geo = residuals_and_geometry(T, rays, model, *a, **k)
-        return (np.concatenate([r, extra_residuals(T)], 1) if extras else r), th, geo
+    def evaluate(T, T6, theta=None, cs=None):
+        """Residuals (edge, then extra), nearest angles with their cos and sin, and the edge
+        normal equations."""
+        r, th, cs, A, g = edge_normal_equations(
+            T, T6, FD_STEPS, rays, model, sigma, loss, theta, cs
+        )
+        return (np.concatenate([r, extra_residuals(T)], 1) if extras else r), th, cs, A, g
 
     T, T6, E6 = with_steps(x)
-    r, theta, geo = both(T)
+    r, theta, cs, A_edge, g_edge = evaluate(T, T6)
     cost = robust_cost(r, sigma, colw, loss)
     lam = np.full(K, 1e-2)
     for _ in range(iters):
-        ok = np.isfinite(cost)
-        if not ok.any():
+        if not np.isfinite(cost).any():
             break
-        w = colw * _irls_weights(r, sigma, loss)
-        w = np.where(np.isfinite(w), w, 0.0)
-        rr = np.where(np.isfinite(r), r, 0.0)
-        # Pose derivatives by finite differences (cheap: 6 poses per start, made with the
-        # trial poses of the previous iteration), residual derivatives analytically for the
-        # edge points, by differences for the extra terms.
-        dT = (T6 - T[:, None]) / FD_STEPS[None, :, None, None]
-        J = edge_jacobian(T, dT, rays, model, theta, geo)
+        A, g = A_edge, g_edge
         if extras:
-            re = E6 - rr[:, None, n_edge:]
-            J = np.concatenate([J, re / FD_STEPS[None, :, None]], 2)
-        J = np.where(np.isfinite(J), J, 0.0)
-        Jw = J * w[:, None, :]
-        A = Jw @ J.transpose(0, 2, 1)
-        g = (Jw @ rr[..., None])[..., 0]
+            # The extra terms' part: derivatives by differences (the stepped poses' residuals
+            # were made with the trial poses of the previous iteration).
+            rx = r[:, n_edge:]
+            w = extra_w * _irls_weights(rx, sigma, loss)
+            w = np.where(np.isfinite(w), w, 0.0)
+            rx = np.where(np.isfinite(rx), rx, 0.0)
+            J = (E6 - rx[:, None]) / FD_STEPS[None, :, None]
+            J = np.where(np.isfinite(J), J, 0.0)
+            Jw = J * w[:, None, :]
+            A = A + Jw @ J.transpose(0, 2, 1)
+            g = g + (Jw @ rx[..., None])[..., 0]
         diag = np.einsum("kii->ki", A) + 1e-9
-        # A + λ·diag(A) (+1e-9) on the diagonal: the same bits as adding λ·diag ⊗ I (the
-        # off-diagonal zeros add nothing).
         Ad = A + 0.0
         Ad[:, _DIAG, _DIAG] += lam[:, None] * diag
         try:
@@ -125,18 +121,9 @@ def levenberg_marquardt(
             break
         xn = x + delta
         Tn, T6n, E6n = with_steps(xn)
-        rn, thn, geon = both(Tn, theta_start=theta, start_cs=(geo[2], geo[3]))
+        rn, thn, csn, An, gn = evaluate(Tn, T6n, theta, cs)
         cn = robust_cost(rn, sigma, colw, loss)
         better = cn < cost
-        # The accepted rows' residual geometry and stepped poses, for the next Jacobian.
-        if better.all():
-            geo, T6, E6 = geon, T6n, E6n
-        else:
-            for kept, trial in zip(geo, geon, strict=True):
-                kept[..., better, :] = trial[..., better, :]
-            T6 = np.where(better[:, None, None, None], T6n, T6)
-            if extras:
-                E6 = np.where(better[:, None, None], E6n, E6)
         x[better], T[better], r[better], theta[better], cost[better] = (
             xn[better],
             Tn[better],
@@ -144,6 +131,10 @@ def levenberg_marquardt(
             thn[better],
             cn[better],
         )
+        A_edge[better], g_edge[better], T6[better] = An[better], gn[better], T6n[better]
+        cs[:, better] = csn[:, better]
+        if extras:
+            E6[better] = E6n[better]
         lam = np.where(better, lam / 3.0, lam * 4.0)
         lam = np.clip(lam, 1e-7, 1e7)
     return x, cost

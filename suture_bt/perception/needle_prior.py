@@ -283,15 +283,13 @@ def seed_poses(priors: Sequence[NeedlePrior], model: NeedleModel) -> np.ndarray:
         ]
         turns = turns[np.argsort(miss)[:4]]
     places = np.linspace(model.tip_angle, model.base_angle, SEED_PLACES + 2)[1:-1]
-    out = []
-    for psi in turns:
-        radial = np.cos(psi) * e0 + np.sin(psi) * e1  # centre → pinch, world
-        for a in places:
-            # Needle frame: the pinch at arc angle a, so x turns by -a from the radial.
-            x = np.cos(-a) * radial + np.sin(-a) * np.cross(z, radial)
-            R = np.column_stack([x, np.cross(z, x), z])
-            T = np.eye(4)
-            T[:3, :3] = R
-            T[:3, 3] = pinch - model.radius * radial
-            out.append(T)
-    return np.array(out)
+    # Every (turn, place) at once: the radial (centre → pinch, world) and, the pinch at arc
+    # angle a, the needle's x turned by -a from it.
+    psi, a = (v.ravel() for v in np.meshgrid(turns, places, indexing="ij"))
+    radial = np.cos(psi)[:, None] * e0 + np.sin(psi)[:, None] * e1
+    x = np.cos(-a)[:, None] * radial + np.sin(-a)[:, None] * np.cross(z, radial)
+    out = np.zeros((len(psi), 4, 4))
+    out[:, :3, 0], out[:, :3, 1], out[:, :3, 2] = x, np.cross(z, x), z
+    out[:, :3, 3] = pinch - model.radius * radial
+    out[:, 3, 3] = 1.0
+    return out

@@ -11,9 +11,11 @@ Poses are ``T_cam_needle`` in the left camera's OpenCV frame.
 from __future__ import annotations
 
 import functools
+import math
 
 import cv2
 import numpy as np
+from numba import njit
 
 from suture_bt.geometry import NeedleModel
 from suture_bt.interfaces import CameraModel
@@ -63,58 +65,66 @@ def _needle_frame_basis(model: NeedleModel) -> tuple[np.ndarray, float, float]:
 def params_to_pose(params: np.ndarray, cam: CameraModel, model: NeedleModel) -> np.ndarray:
     """Poses T_cam_needle (..., 4, 4) from parameters (..., 6); NaN where infeasible.
 
-    Component by component (the fit calls this thousands of times on small batches, where
-    each numpy call's overhead dominates); the same arithmetic as :func:`pixel_rays`,
-    :func:`_unit` and :func:`_cross` in the same order, so the same bits.
+    The fit calls this thousands of times on small batches, where numpy's per-call overhead
+    would dominate: a compiled loop over the rows (:func:`_poses_from_params`).
     """
     x = np.asarray(params, dtype=float)
     Bn, chord, h = _needle_frame_basis(model)
-    rb = _ray_components(cam, x[..., 0], x[..., 1])
-    rt = _ray_components(cam, x[..., 2], x[..., 3])
-    phi, psi = x[..., 4], x[..., 5]
-    cg = np.clip(rb[0] * rt[0] + rb[1] * rt[1] + rb[2] * rt[2], -1.0, 1.0)
-    gamma = np.arccos(cg)
-    sg = np.maximum(np.sin(gamma), 1e-9)
-    s = chord * np.sin(gamma + phi) / sg
-    t = chord * np.sin(phi) / sg
-    bad = (s <= 0) | (t <= 0) | (phi <= 0)
-    B = [s * rb[i] for i in range(3)]
-    T = [t * rt[i] for i in range(3)]
-    e1 = _unit3([T[i] - B[i] for i in range(3)])
-    mid = [0.5 * (B[i] + T[i]) for i in range(3)]
-    n0 = _unit3(_cross3(e1, _unit3(mid)))
-    n1 = _cross3(e1, n0)
-    cp, sp = np.cos(psi), np.sin(psi)
-    u = [cp * n0[i] + sp * n1[i] for i in range(3)]
-    w = _cross3(e1, u)
-    Rc = np.empty(x.shape[:-1] + (3, 3))
-    for i in range(3):
-        Rc[..., i, 0], Rc[..., i, 1], Rc[..., i, 2] = e1[i], u[i], w[i]
-    out = np.zeros(x.shape[:-1] + (4, 4))
-    out[..., :3, :3] = Rc @ Bn.T
-    for i in range(3):
-        out[..., i, 3] = mid[i] - h * u[i]
-    out[..., 3, 3] = 1.0
-    out[bad] = np.nan
+    flat = np.ascontiguousarray(x.reshape(-1, 6))
+    out = _poses_from_params(flat, cam.fx, cam.fy, cam.cx, cam.cy, Bn, chord, h)
+    return out.reshape(x.shape[:-1] + (4, 4))
+
+
+@njit(cache=True)
+def _poses_from_params(x, fx, fy, cx, cy, Bn, chord, h):
+    """Rows of :func:`params_to_pose`: the ends' rays, their depths by the law of sines from
+    the chord, the arc plane turned by psi about the chord."""
+    out = np.zeros((x.shape[0], 4, 4))
+    v = np.empty((10, 3))  # working vectors
+    rb, rt, B, T, e1, mid, n0, n1, u, w = v[0], v[1], v[2], v[3], v[4], v[5], v[6], v[7], v[8], v[9]
+    Rc = np.empty((3, 3))
+    for k in range(x.shape[0]):
+        for ray, c in ((rb, 0), (rt, 2)):
+            d0, d1 = (x[k, c] - cx) / fx, (x[k, c + 1] - cy) / fy
+            n = math.sqrt(d0 * d0 + d1 * d1 + 1.0)
+            ray[0], ray[1], ray[2] = d0 / n, d1 / n, 1.0 / n
+        phi, psi = x[k, 4], x[k, 5]
+        cg = min(max(rb[0] * rt[0] + rb[1] * rt[1] + rb[2] * rt[2], -1.0), 1.0)
+        gamma = math.acos(cg)
+        sg = max(math.sin(gamma), 1e-9)
+        s = chord * math.sin(gamma + phi) / sg
+        t = chord * math.sin(phi) / sg
+        if not (s > 0 and t > 0 and phi > 0):
+            out[k] = np.nan
+            continue
+        for i in range(3):
+            B[i], T[i] = s * rb[i], t * rt[i]
+            e1[i] = T[i] - B[i]
+            mid[i] = 0.5 * (B[i] + T[i])
+        e1 /= math.sqrt(e1[0] * e1[0] + e1[1] * e1[1] + e1[2] * e1[2])
+        m = mid / math.sqrt(mid[0] * mid[0] + mid[1] * mid[1] + mid[2] * mid[2])
+        _cross_into(e1, m, n0)
+        n0 /= math.sqrt(n0[0] * n0[0] + n0[1] * n0[1] + n0[2] * n0[2])
+        _cross_into(e1, n0, n1)
+        cp, sp = math.cos(psi), math.sin(psi)
+        for i in range(3):
+            u[i] = cp * n0[i] + sp * n1[i]
+        _cross_into(e1, u, w)
+        for i in range(3):
+            Rc[i, 0], Rc[i, 1], Rc[i, 2] = e1[i], u[i], w[i]
+        for i in range(3):
+            for j in range(3):
+                out[k, i, j] = Rc[i, 0] * Bn[j, 0] + Rc[i, 1] * Bn[j, 1] + Rc[i, 2] * Bn[j, 2]
+            out[k, i, 3] = mid[i] - h * u[i]
+        out[k, 3, 3] = 1.0
     return out
 
 
-def _ray_components(cam: CameraModel, u: np.ndarray, v: np.ndarray) -> list[np.ndarray]:
-    """:func:`pixel_rays` as three component arrays (the same bits)."""
-    d0, d1 = (u - cam.cx) / cam.fx, (v - cam.cy) / cam.fy
-    n = np.sqrt(d0 * d0 + d1 * d1 + 1.0)
-    return [d0 / n, d1 / n, 1.0 / n]
-
-
-def _unit3(v: list[np.ndarray]) -> list[np.ndarray]:
-    """:func:`_unit` on three component arrays (the same bits)."""
-    n = np.sqrt(v[0] * v[0] + v[1] * v[1] + v[2] * v[2])
-    return [v[0] / n, v[1] / n, v[2] / n]
-
-
-def _cross3(a: list[np.ndarray], b: list[np.ndarray]) -> list[np.ndarray]:
-    """:func:`_cross` on three component arrays."""
-    return [a[1] * b[2] - a[2] * b[1], a[2] * b[0] - a[0] * b[2], a[0] * b[1] - a[1] * b[0]]
+@njit(cache=True)
+def _cross_into(a, b, out):
+    out[0] = a[1] * b[2] - a[2] * b[1]
+    out[1] = a[2] * b[0] - a[0] * b[2]
+    out[2] = a[0] * b[1] - a[1] * b[0]
 
 
 def pose_to_params(T_cam_needle: np.ndarray, cam: CameraModel, model: NeedleModel) -> np.ndarray:

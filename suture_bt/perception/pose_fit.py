@@ -23,6 +23,7 @@ import numpy as np
 
 from suture_bt.geometry import NeedleModel
 from suture_bt.interfaces import StereoCameraModel
+from suture_bt.perception.edge_kernel import edge_normal_equations
 from suture_bt.perception.edge_residuals import (  # noqa: F401 - re-exported
     N_THETA_GRID,
     EdgeRays,
@@ -211,7 +212,9 @@ class PoseFitter:
         def lowest(st: np.ndarray, n: int) -> np.ndarray:
             """The n lowest-cost feasible rows of ``st`` on the coarse edge subset."""
             T0 = params_to_pose(st, cam, self.model)
-            r0, _ = residuals(T0, coarse, self.model, grid=12)
+            r0 = edge_normal_equations(
+                T0, None, FD_STEPS, coarse, self.model, 3.0, "cauchy", grid=12
+            )[0]
             r0 = np.concatenate([r0] + [t(T0) for t in terms], 1)
             c0 = robust_cost(r0, 3.0, coarse_w)
             order = np.argsort(c0)[:n]

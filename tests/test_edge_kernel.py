@@ -1,0 +1,72 @@
+"""The compiled edge loop agrees with the numpy edge objective: residuals, nearest angles and
+the robust normal equations, searched by grid or seeded, at feasible and infeasible poses."""
+
+import numpy as np
+import pytest
+from test_pose_fit import _scene_1080p
+
+from suture_bt.geometry import NeedleModel
+from suture_bt.perception.edge_kernel import edge_normal_equations
+from suture_bt.perception.edge_residuals import edge_jacobian, edge_rays, residuals_and_geometry
+from suture_bt.perception.fit_solver import FD_STEPS, _irls_weights
+from suture_bt.perception.mask_view import edge_points
+from suture_bt.perception.needle_projection import params_to_pose, pose_to_params
+
+MODEL = NeedleModel()
+
+
+def _poses_near_the_needle(n: int = 24):
+    """Rays of a 1080p needle's outline, and poses (with their stepped poses) scattered about
+    it, the last one infeasible (NaN)."""
+    st, T, left, right, _ = _scene_1080p(7, 0.0)
+    rays = edge_rays(st, edge_points(left)[::3], edge_points(right)[::3])
+    x = pose_to_params(T[None], st.left, MODEL)
+    x = x + np.random.default_rng(0).normal(0, [2, 2, 2, 2, 0.05, 0.2], (n, 6))
+    x[-1, 4] = -1.0  # infeasible
+    steps = np.concatenate([np.zeros((1, 6)), np.diag(FD_STEPS)])
+    P = params_to_pose(x[:, None] + steps[None], st.left, MODEL)
+    return rays, np.ascontiguousarray(P[:, 0]), P[:, 1:]
+
+
+@pytest.mark.parametrize("loss", ["cauchy", "geman_mcclure"])
+def test_kernel_matches_the_numpy_residuals_and_normal_equations(loss):
+    rays, T, T6 = _poses_near_the_needle()
+    r, theta, geo = residuals_and_geometry(T, rays, MODEL)
+    dT = (T6 - T[:, None]) / FD_STEPS[None, :, None, None]
+    J = edge_jacobian(T, dT, rays, MODEL, theta, geo)
+    w = _irls_weights(r, 1.0, loss)
+    w = np.where(np.isfinite(w), w, 0.0)
+    J = np.where(np.isfinite(J), J, 0.0)
+    rr = np.where(np.isfinite(r), r, 0.0)
+    A = (J * w[:, None]) @ J.transpose(0, 2, 1)
+    g = ((J * w[:, None]) @ rr[..., None])[..., 0]
+
+    rk, thk, csk, Ak, gk = edge_normal_equations(T, T6, FD_STEPS, rays, MODEL, 1.0, loss)
+    assert np.array_equal(np.isnan(r), np.isnan(rk))
+    assert np.isnan(rk[-1]).all()  # the infeasible pose explains nothing
+    np.testing.assert_allclose(rk[:-1], r[:-1], atol=1e-6)  # px
+    np.testing.assert_allclose(thk[:-1], theta[:-1], atol=1e-10)
+    np.testing.assert_allclose(csk, [np.cos(thk), np.sin(thk)], atol=1e-14)
+    scale = np.abs(A).max()
+    np.testing.assert_allclose(Ak, A, atol=1e-8 * scale)
+    np.testing.assert_allclose(gk, g, atol=1e-8 * np.abs(g).max())
+    np.testing.assert_array_equal(Ak, Ak.transpose(0, 2, 1))
+
+
+def test_seeded_search_matches_and_residuals_alone_leave_the_system_empty():
+    rays, T, _ = _poses_near_the_needle()
+    _, theta, geo = residuals_and_geometry(T, rays, MODEL)
+    moved = T.copy()
+    moved[:, :3, 3] += 2e-4  # a nearby pose, searched from the previous angles
+    r, th, _ = residuals_and_geometry(moved, rays, MODEL, theta_start=theta, start_cs=geo[2:4])
+    rk, thk, csk, Ak, gk = edge_normal_equations(
+        moved, None, FD_STEPS, rays, MODEL, 1.0, "cauchy", theta
+    )
+    np.testing.assert_allclose(rk[:-1], r[:-1], atol=1e-6)
+    np.testing.assert_allclose(thk[:-1], th[:-1], atol=1e-10)
+    np.testing.assert_allclose(csk, [np.cos(thk), np.sin(thk)], atol=1e-14)
+    assert not Ak.any() and not gk.any()
+    # A coarse grid (the start scoring's) is honoured.
+    r12, _ = residuals_and_geometry(T, rays, MODEL, grid=12)[:2]
+    rk12 = edge_normal_equations(T, None, FD_STEPS, rays, MODEL, 1.0, "cauchy", grid=12)[0]
+    np.testing.assert_allclose(rk12[:-1], r12[:-1], atol=1e-6)
