@@ -76,11 +76,11 @@ def edge_system(
     cs_start, sigma, loss, want_system,
 ):  # fmt: skip
     """Residuals r (K, N), nearest angles θ (K, N) and their cos and sin (2, K, N) at poses T
-    (K, 4, 4); with
-    ``want_system``, also the normal equations A = Jᵀ W J (K, 6, 6) and g = Jᵀ W r (K, 6) of
-    the robust loss (IRLS weights W), J by the poses T6 (K, 6, 4, 4) stepped by ``steps``.
-    ``theta_start`` (K, N) with its cos and sin ``cs_start`` (2, K, N) seeds the Newton
-    search (an empty array: grid search)."""
+    (K, 4, 4); with ``want_system``, also the normal equations A = Jᵀ W J (K, 6, 6) and
+    g = Jᵀ W r (K, 6) of the robust loss (IRLS weights W), J by the poses T6 (K, 6, 4, 4)
+    stepped by ``steps``. ``theta_start`` (K, N) with its cos and sin ``cs_start`` (2, K, N)
+    seeds the Newton search (an empty array: grid search). Plain arrays and numbers, as
+    numba compiles them: :func:`edge_normal_equations` is the typed entry point."""
     K, N = T.shape[0], origins.shape[0]
     r = np.full((K, N), np.nan)
     theta = np.empty((K, N))
