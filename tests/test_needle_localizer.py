@@ -89,45 +89,6 @@ def test_shipped_network_localizes_a_rendered_needle(monkeypatch):
     assert 0 < est.angle_std_deg < 1.0 and 0 < est.position_std_mm < 1.0
 
 
-def test_keypoint_depth_contradicted_by_the_masks_neither_gates_nor_hints():
-    """A keypoint depth far too deep (0.3 m for a wire at 0.1 m) would gate the mask thinner
-    than the wire and drop it all; the masks' own stereo disparity overrides it."""
-    loc = NeedleLocalizer(stereo(1920, 1080), net=_eager_net())
-    left = np.zeros((1080, 1920, 3), np.uint8)
-    right = left.copy()
-    d = loc.stereo.left.fx * loc.stereo.baseline / 0.1  # 31.6 px at 0.1 m
-    left[500:506, 900:1000] = (160, 160, 168)  # a wire 6 px wide: 0.72 mm at 0.1 m
-    right[500:506, 900 - round(d) : 1000 - round(d)] = (160, 160, 168)
-    prob = np.ones((2, 270, 480), np.float32)
-    views, half_width, depth, _ = loc._masks((left, right), prob, 4.0, 0.3)
-    assert views[0].mask.sum() == 600 and views[1].mask.sum() == 600
-    assert depth is None and half_width > 3.0
-    # Agreeing depths are kept as the fit's hint.
-    _, _, depth, _ = loc._masks((left, right), prob, 4.0, 0.105)
-    assert depth == 0.105
-
-
-def test_masks_mark_the_occluder_and_keep_it_with_the_free_space_term():
-    """A grey jaw touching the wire is marked as occluder in both modes (its boundary with
-    the needle is no outline), and the free-space term does not discard that mark."""
-    for free in (False, True):
-        loc = NeedleLocalizer(stereo(1920, 1080), net=_eager_net(), use_free_space=free)
-        d = round(loc.stereo.left.fx * loc.stereo.baseline / 0.1)  # disparity at 0.1 m
-        images = []
-        for shift in (0, d):
-            img = np.zeros((1080, 1920, 3), np.uint8)
-            img[:] = (215, 140, 132)
-            img[500:506, 900 - shift : 1000 - shift] = (160, 160, 168)  # the wire
-            img[480:526, 1000 - shift : 1040 - shift] = (190, 190, 196)  # a thick jaw at its end
-            images.append(img)
-        prob = np.ones((2, 270, 480), np.float32)
-        views, _, _, _ = loc._masks(tuple(images), prob, 4.0, 0.1)
-        v = views[0]
-        assert v.occluder is not None and v.occluder.any()
-        assert not (v.occluder & v.mask).any()
-        assert (v.free_dt is not None) == free
-
-
 def test_keypoints_farther_apart_than_the_needle_can_appear_keep_only_the_stronger():
     """At 1080p the needle's ends are at most ~340 px apart (its chord at 50 mm, with
     slack): a pair 900 px apart has one keypoint on something else, the weaker is dropped."""
