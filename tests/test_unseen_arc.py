@@ -115,7 +115,7 @@ def test_the_mirror_twin_of_a_needle_behind_a_jaw_runs_over_background():
     from test_needle_prior import _twin_case
     from test_pose_fit import _scene_1080p
 
-    from suture_bt.perception.needle_localizer import MAX_EXPOSED
+    from suture_bt.perception.exposure_gate import MAX_EXPOSED
     from suture_bt.perception.pose_fit import PoseFitter
 
     st, T, occ, short, kw = _twin_case()
@@ -163,11 +163,12 @@ def test_localizer_refuses_the_mirror_twin_of_the_held_needle_at_the_task3_start
     import pytest
     from perception_helpers import task_scene
 
-    from suture_bt.perception import needle_localizer
+    from suture_bt.perception import needle_localizer, needle_masks
     from suture_bt.perception.needle_localizer import NeedleLocalizer
     from suture_bt.perception.pose_fit import NeedleNotFound
 
     monkeypatch.setattr(needle_localizer, "MIN_DEPTH", 0.05)
+    monkeypatch.setattr(needle_masks, "MIN_DEPTH", 0.05)
     stereo_model, left, right, _, _, tissue = task_scene("held_start", 6)
     with pytest.raises(NeedleNotFound, match="hidden by nothing"):
         NeedleLocalizer(stereo_model, tissue=tissue).localize(left, right)

@@ -6,9 +6,10 @@
    :mod:`colour_refine`).
 3. The stereo pose fit (:mod:`pose_fit`) starts from the left keypoints, with a depth hint
    from their stereo disparity, and optionally a warm start from the previous estimate.
-4. The fitted arc's unseen part must be hidden by something (:mod:`unseen_arc`: a jaw or
-   shaft, the border, the tissue where the caller's tissue model says it can hide it), and
-   no wire both eyes see may lie deep inside the known tissue; else a refusal.
+4. The fitted arc's unseen part must be hidden by something (:mod:`exposure_gate`,
+   :mod:`unseen_arc`: a jaw or shaft, the border, the tissue where the caller's tissue model
+   says it can hide it), and no wire both eyes see may lie deep inside the known tissue; else
+   a refusal.
 5. The outline cannot tell base from tip: the colour at the fitted ends (the violet swage band
    at the base, :mod:`needle_ends`; :mod:`base_or_tip`) does, else continuity with the previous
    estimate or the holder's jaws.
@@ -29,6 +30,7 @@ from suture_bt.geometry import NeedleModel
 from suture_bt.interfaces import StereoCameraModel
 from suture_bt.perception.base_or_tip import BaseTipChooser, occlusion_radius
 from suture_bt.perception.colour_refine import ColourRule
+from suture_bt.perception.exposure_gate import MAX_EXPOSED, ExposureGate
 from suture_bt.perception.geodesic_ends import geodesic_ends
 from suture_bt.perception.needle_ends import band_pixels
 from suture_bt.perception.needle_estimate import NeedleEstimate
@@ -63,11 +65,7 @@ from suture_bt.perception.pose_fit import (
     PoseFitter,
     mask_ends,
 )
-from suture_bt.perception.unseen_arc import (
-    ArcExposure,
-    arc_exposure,
-    below_port_planes,
-)
+from suture_bt.perception.unseen_arc import ArcExposure
 
 #: A keypoint heatmap peak below this probability is not trusted (the mask's ends are used).
 MIN_KEYPOINT_SCORE = 0.15
@@ -101,20 +99,6 @@ MAX_ANGLE_STD_DEG = 2.0
 MAX_ANGLE_STD_DEG_HELD = 4.0
 #: A held-by prior at most this loose (m: a calibrated holder's) pins the arc.
 HELD_PIN_TOLERANCE = 0.0015
-#: A final fit whose model arc runs longer than this (m of arc, in all, in both eyes) over pixels
-#: where neither the needle nor anything that could hide it is seen (a jaw or shaft, the
-#: border, the tissue where the known phantom can hide it: :mod:`unseen_arc`) is refused:
-#: wire the image says is not there. Development seed 6173 (25 scenes per set, every set):
-#: correct answers exposed at most 2.8 mm (both eyes) / 4.2 mm (one eye); the mirror twins
-#: of the held needle at the Task 3 start 6.3-8.7 mm, of a needle in a port 9.4 mm (and 4.9
-#: mm in all for one whose exposed arc is split into runs by stretches the ridge hides).
-MAX_EXPOSED = 0.0035
-#: The same in either eye alone (a twin seen past the border or a jaw by the other eye).
-MAX_EXPOSED_ONE_EYE = 0.006
-#: A fit that puts more than this (m of arc) of wire seen by both eyes deep inside the known
-#: tissue (where it would be hidden) is refused (seed 6173: correct answers 0, a 180° twin of
-#: a needle in a port 5.9 mm).
-MAX_SEEN_INSIDE = 0.001
 
 
 def _net_input(rgb: np.ndarray, width: int) -> tuple[np.ndarray, float]:
@@ -344,48 +328,10 @@ class NeedleLocalizer:
         return out[0], out[1]
 
     def _exposure(self, images, views, T_cam: np.ndarray, priors) -> ArcExposure:
-        """The fitted arc's unseen, unhidden stretches; NeedleNotFound when both eyes show a
-        stretch longer than ``max_exposed`` (m) with no needle and nothing in front of it."""
-        ports = [(p.point, p.normal) for p in priors if getattr(p, "normal", None) is not None]
-        inside, tissue_hides = self.tissue, self.tissue is None and not ports
-        if ports:
-            planes = below_port_planes(ports)
-            known = self.tissue
-            inside = (
-                planes
-                if known is None
-                else (lambda w, margin=0.0: planes(w, margin) | known(w, margin))
-            )
-        hw = max(self.model.wire_radius * self.stereo.left.fx / float(T_cam[2, 3]), 1.0)
-        exp = arc_exposure(
-            images,
-            (views[0], views[1]),
-            self.stereo,
-            T_cam,
-            self.model,
-            hw,
-            self.rule,
-            inside_tissue=inside,
-            tissue_hides=tissue_hides,
-        )
-        if exp.seen_inside > MAX_SEEN_INSIDE and np.isfinite(self.max_exposed):
-            raise NeedleNotFound(
-                f"the fit puts {1e3 * exp.seen_inside:.1f} mm of the wire both eyes see inside "
-                "the tissue, where it would be hidden: its unseen part is hidden by nothing "
-                "it could be behind (a mirror twin)"
-            )
-        one_eye = self.max_exposed * MAX_EXPOSED_ONE_EYE / MAX_EXPOSED
-        if exp.both_total > self.max_exposed or exp.worst > one_eye:
-            raise NeedleNotFound(
-                f"the fitted arc runs {1e3 * exp.both_total:.1f} mm (left "
-                f"{1e3 * exp.total_exposed[0]:.1f}, right {1e3 * exp.total_exposed[1]:.1f}; "
-                f"longest stretch {1e3 * exp.worst:.1f}) "
-                "where neither the needle nor anything that could hide it is seen "
-                f"(> {1e3 * self.max_exposed:.1f} mm in both, {1e3 * one_eye:.1f} in one): its "
-                "unseen part is hidden by nothing "
-                "(a mirror twin or a pose slid along its circle)"
-            )
-        return exp
+        """:class:`~suture_bt.perception.exposure_gate.ExposureGate` with this localiser's
+        cameras, model, colour rule, tissue model and exposure limit."""
+        gate = ExposureGate(self.stereo, self.model, self.rule, self.tissue, self.max_exposed)
+        return gate(images, views, T_cam, priors)
 
     def _masks(self, images, prob, scale, depth, anchors=(None, None)):
         """:class:`~suture_bt.perception.needle_masks.NeedleMasks` with this localiser's

@@ -1,0 +1,37 @@
+"""The exposure gate refuses a fitted arc whose unseen part nothing hides, saying how much
+shows over the background, and lets the needle's own pose through."""
+
+import pytest
+from test_needle_prior import _twin_case
+from test_pose_fit import _scene_1080p
+from test_unseen_arc import MODEL, _images_with_cover
+
+from suture_bt.perception.colour_refine import ColourRule
+from suture_bt.perception.exposure_gate import ExposureGate
+from suture_bt.perception.pose_fit import NeedleNotFound, PoseFitter
+
+
+def _twin_scene():
+    """test_unseen_arc's case: the tip half behind a grey jaw; the fit without priors answers
+    the tilt-mirror twin, about 2.8 mm of whose arc shows over the black background."""
+    st, T, occ, short, kw = _twin_case()
+    _, _, left, right, _ = _scene_1080p(10, 0.0)
+    images = _images_with_cover(st, (left, right), occ, px=2)
+    twin = PoseFitter(st, MODEL).fit(*occ, short, **kw).T_cam_needle
+    return st, T, twin, images, tuple(occ)
+
+
+def test_a_twin_over_the_background_is_refused_with_what_shows():
+    st, T, twin, images, views = _twin_scene()
+    gate = ExposureGate(st, MODEL, ColourRule(), max_exposed=0.002)
+    assert gate(images, views, T, ()).worst == 0.0  # the needle: its hidden part is covered
+    with pytest.raises(NeedleNotFound, match=r"runs \d+\.\d mm .* hidden by nothing"):
+        gate(images, views, twin, ())
+
+
+def test_no_limit_means_no_refusal():
+    st, _, twin, images, views = _twin_scene()
+    exposure = ExposureGate(st, MODEL, ColourRule(), max_exposed=float("inf"))(
+        images, views, twin, ()
+    )
+    assert exposure.both > 0.002
