@@ -75,7 +75,7 @@ def test_shipped_network_localizes_a_rendered_needle(monkeypatch):
         with pytest.raises(NeedleNotFound, match="leaves the pose loose"):  # and a loose one
             NeedleLocalizer(sim.stereo, max_angle_std_deg=0.0).localize(left, right)
         with monkeypatch.context() as m:  # so is one that explains too little of the mask
-            m.setattr("suture_bt.perception.needle_localizer.MIN_INLIER_FRACTION", 1.01)
+            m.setattr("suture_bt.perception.fit_attempts.MIN_INLIER_FRACTION", 1.01)
             with pytest.raises(NeedleNotFound, match="holds something else"):
                 NeedleLocalizer(sim.stereo).localize(left, right)
         T_true = invert(sim.stereo.left.T_world_cam) @ s.T_world_needle
@@ -108,7 +108,7 @@ def test_a_held_needle_30_mm_from_the_cameras_is_localised(monkeypatch):
     without priors; in scene 3 (36 mm) every candidate of the image's own search misses the
     holder's pinch point, and the starts the held-by and across-the-jaws priors seed
     (:func:`~suture_bt.perception.needle_prior.seed_poses`) reach the needle."""
-    from suture_bt.perception import needle_localizer
+    from suture_bt.perception import fit_attempts
     from suture_bt.perception.needle_prior import PriorContradicted
 
     stereo_model, left, right, T, priors, tissue = task_scene("held_start", 19)
@@ -121,7 +121,7 @@ def test_a_held_needle_30_mm_from_the_cameras_is_localised(monkeypatch):
     loc = NeedleLocalizer(stereo_model, tissue=tissue)
     pos, ang = pose_errors(loc.localize(left, right, priors=priors).T_cam_needle, T)
     assert pos < 0.5 and ang < 2.0
-    monkeypatch.setattr(needle_localizer, "seed_poses", lambda *a: np.zeros((0, 4, 4)))
+    monkeypatch.setattr(fit_attempts, "seed_poses", lambda *a: np.zeros((0, 4, 4)))
     with pytest.raises(PriorContradicted, match="pinch point"):
         loc.localize(left, right, priors=priors)
 

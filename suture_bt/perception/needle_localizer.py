@@ -4,8 +4,9 @@
    coarse needle mask + base/tip heatmaps (sub-pixel keypoints).
 2. Each eye's coarse mask gates a full-resolution colour test (:mod:`needle_masks`,
    :mod:`colour_refine`).
-3. The stereo pose fit (:mod:`pose_fit`) starts from the left keypoints, with a depth hint
-   from their stereo disparity, and optionally a warm start from the previous estimate.
+3. The stereo pose fit (:mod:`fit_attempts`, :mod:`pose_fit`) starts from the left keypoints,
+   with a depth hint from their stereo disparity, and optionally a warm start from the
+   previous estimate.
 4. The fitted arc's unseen part must be hidden by something (:mod:`exposure_gate`,
    :mod:`unseen_arc`: a jaw or shaft, the border, the tissue where the caller's tissue model
    says it can hide it), and no wire both eyes see may lie deep inside the known tissue; else
@@ -28,11 +29,15 @@ import torch
 
 from suture_bt.geometry import NeedleModel
 from suture_bt.interfaces import StereoCameraModel
-from suture_bt.perception.base_or_tip import BaseTipChooser, occlusion_radius
+from suture_bt.perception.base_or_tip import BaseTipChooser
 from suture_bt.perception.colour_refine import ColourRule
 from suture_bt.perception.exposure_gate import MAX_EXPOSED, ExposureGate
-from suture_bt.perception.geodesic_ends import geodesic_ends
-from suture_bt.perception.needle_ends import band_pixels
+from suture_bt.perception.fit_attempts import (  # noqa: F401 - gates, re-exported
+    MAX_RMS_PX,
+    MIN_INLIER_FRACTION,
+    STRONG_KEYPOINT_SCORE,
+    FitAttempts,
+)
 from suture_bt.perception.needle_estimate import NeedleEstimate
 from suture_bt.perception.needle_masks import (  # noqa: F401 - the working range, re-exported
     MAX_DEPTH,
@@ -45,10 +50,8 @@ from suture_bt.perception.needle_prior import (
     HeldPrior,
     NeedlePrior,
     PredictedPosePrior,
-    PriorContradicted,
     check_across_jaws,
     check_orientation,
-    seed_poses,
 )
 from suture_bt.perception.network import (
     INPUT_SIZE,
@@ -58,34 +61,19 @@ from suture_bt.perception.network import (
     for_inference,
     load_network,
 )
-from suture_bt.perception.occlusion import anchored_ends, end_is_occluded, extended_ends
 from suture_bt.perception.pose_fit import (
     NeedleNotFound,
     PoseFitResult,
     PoseFitter,
-    mask_ends,
 )
 from suture_bt.perception.unseen_arc import ArcExposure
 
 #: A keypoint heatmap peak below this probability is not trusted (the mask's ends are used).
 MIN_KEYPOINT_SCORE = 0.15
-#: A keypoint this confident anchors its end even when the other end's keypoint is weak
-#: (then the other end is sought at, and behind, the visible piece's far end).
-STRONG_KEYPOINT_SCORE = 0.5
 #: Slack on how far apart one needle's two end keypoints can be (its chord seen at MIN_DEPTH).
 MAX_CHORD_MARGIN = 1.2
 #: Base and tip keypoints closer than this (full-resolution px) are not trusted as two ends.
 MIN_END_SEPARATION_PX = 8.0
-#: A final fit whose RMS edge residual exceeds this (px) is refused: over six benchmark sets
-#: (1,200 scenes: 1080p and 480p, unoccluded and occluded, two seeds) every correct fit stayed
-#: at or below 0.40 px, while 20 wrong answers (mirror twins, swaps, 20-60 deg tilts) lay
-#: between 0.45 and 0.6 px.
-MAX_RMS_PX = 0.45
-#: A final fit explaining a smaller share of the edge points (within 1.5 px) is refused: on
-#: the benchmarks every correct answer explained at least 71 % (the retrained network: at
-#: least 79 % on the re-drawn 1080p occluded sets), those below 60 % were a mask of another
-#: object (one was 117 mm off), and the 64-68 % ones there wrong (one 160 deg off).
-MIN_INLIER_FRACTION = 0.7
 #: The fit searches no nearer than this share of the nearest stereo depth (keypoints', masks').
 NEAR_SLACK = 0.7
 #: A final fit whose predicted angle spread (deg; see
@@ -111,16 +99,6 @@ def _net_input(rgb: np.ndarray, width: int) -> tuple[np.ndarray, float]:
     if hp != h:
         small = np.concatenate([small, np.zeros((hp - h, width, 3), small.dtype)], 0)
     return small, s
-
-
-def _same_pair(a, b, tol_px: float = 3.0) -> bool:
-    """Whether two unordered end-pixel pairs coincide within ``tol_px``."""
-    a0, a1, b0, b1 = (np.asarray(p, float) for p in (*a, *b))
-    d = min(
-        max(np.linalg.norm(a0 - b0), np.linalg.norm(a1 - b1)),
-        max(np.linalg.norm(a0 - b1), np.linalg.norm(a1 - b0)),
-    )
-    return bool(d <= tol_px)
 
 
 class NeedleLocalizer:
@@ -344,103 +322,17 @@ class NeedleLocalizer:
     def _fit(
         self, images, views, ends, depth, half_width, previous, kp, score, priors=()
     ) -> PoseFitResult:
-        """Fit from the keypoints (and depth hint), plus end hypotheses behind occluders.
-
-        An end of the visible needle that touches a grey occluder (or the border) may continue
-        behind it (:mod:`occlusion`): pushed-out ends join the fit as alternatives. Where one
-        keypoint is confident and the other weak, the weak end is likely hidden: it is sought
-        at and behind the visible piece's far end. Confident keypoints of both eyes also guide
-        the search as a soft prior (:class:`~suture_bt.perception.pose_fit.EndPriorTerm`). A
-        failed fit often means a keypoint landed off the needle (e.g. on a jaw) or the disparity
-        depth was wrong: it is refit without the depth hint, from the keypoints and from the
-        mask's own ends. (Refitting poor fits too, as before, cost 10-15 ms per occluded frame
-        for one scene in 200 once the search above was in place.) ``priors`` go to the fitter;
-        when every attempt is refused by them, the prior's reason is the refusal.
-        """
-        left = images[0]
-        visible_ends = ends if ends is not None else mask_ends(views[0])
-        radius = occlusion_radius(half_width)
-        occluded = tuple(
-            end_is_occluded(left, views[0], e, radius, self.rule) for e in visible_ends
+        """:class:`~suture_bt.perception.fit_attempts.FitAttempts` with this localiser's
+        cameras, model, colour rule, fitter and gates (the spread limit for these priors)."""
+        attempts = FitAttempts(
+            self.stereo,
+            self.model,
+            self.rule,
+            self.fitter,
+            self.max_rms_px,
+            self._angle_std_limit(priors),
         )
-        behind = extended_ends(visible_ends, occluded)
-        for e in (0, 1):
-            if score[0, e] >= STRONG_KEYPOINT_SCORE > score[0, 1 - e]:
-                h = anchored_ends(kp[0, e], e == 0, views[0])
-                if h is not None:
-                    behind += [h] + extended_ends(h, (e == 1, e == 0))
-        hidden = bool(behind)  # an end touches an occluder or its keypoint is weak
-        along = geodesic_ends(views[0])
-        if along is not None and not _same_pair(along, visible_ends):
-            behind.append(along)
-        end_priors = [kp[eye][score[eye] >= STRONG_KEYPOINT_SCORE] for eye in (0, 1)]
-        # The violet band marks the base: it guides the search as a keypoint would.
-        bands = [band_pixels(img, view) for img, view in zip(images, views, strict=True)]
-        for eye in (0, 1):
-            if bands[eye] is not None:
-                end_priors[eye] = np.concatenate([end_priors[eye], bands[eye].mean(0)[None]])
-        end_priors = tuple(end_priors)
-
-        seeds = seed_poses(priors, self.model)
-        seeds = self.stereo.left.T_cam_world[None] @ seeds if len(seeds) else None
-
-        def attempt(main, alternatives, depth_hint=None) -> PoseFitResult:
-            return self.fitter.fit(
-                views[0],
-                views[1],
-                main,
-                depth_hint=depth_hint,
-                warm_start=previous,
-                alternatives=alternatives,
-                end_priors=end_priors,
-                hidden_end=hidden,
-                priors=priors,
-                seeds=seeds,
-            )
-
-        fit = None
-        contradicted: PriorContradicted | None = None
-        try:
-            fit = attempt(ends, behind, depth)
-        except NeedleNotFound as exc:
-            if isinstance(exc, PriorContradicted):
-                contradicted = exc
-            if ends is None and depth is None:
-                raise
-        if fit is None and ends is not None:
-            # The first fit already searched the occluded-end hypotheses at every depth; new
-            # here are the keypoints without the depth hint and the mask's own ends.
-            main, others = (ends, [None]) if depth is not None else (None, [])
-            try:
-                fit = attempt(main, others)
-            except PriorContradicted as exc:
-                contradicted = exc
-            except NeedleNotFound:
-                pass
-        if fit is None and contradicted is not None:
-            raise contradicted
-        if fit is None:
-            raise NeedleNotFound("no pose explains the needle's outline (every start failed)")
-        if fit.rms_px > self.max_rms_px:
-            raise NeedleNotFound(
-                f"the best pose misses the needle's outline by {fit.rms_px:.2f} px RMS "
-                f"(> {self.max_rms_px:.2f}; {100 * fit.inlier_fraction:.0f} % of its edge "
-                "explained): too little of the needle is seen clearly",
-                best=fit.T_cam_needle.copy(),
-            )
-        if fit.inlier_fraction < MIN_INLIER_FRACTION:
-            raise NeedleNotFound(
-                f"the best pose explains only {100 * fit.inlier_fraction:.0f} % of the mask's "
-                f"edge (< {100 * MIN_INLIER_FRACTION:.0f} %): the mask holds something else"
-            )
-        limit = self._angle_std_limit(priors)
-        if fit.angle_std_deg > limit:
-            raise NeedleNotFound(
-                f"the seen part leaves the pose loose: predicted angle spread "
-                f"{fit.angle_std_deg:.1f} deg (> {limit:.1f}; position "
-                f"{fit.position_std_mm:.1f} mm): too little of the needle's curve is seen"
-            )
-        return fit
+        return attempts(images, views, ends, depth, half_width, previous, kp, score, priors)
 
     def _angle_std_limit(self, priors) -> float:
         """The loosest predicted angle spread answered: wider when a held-by prior pins a
