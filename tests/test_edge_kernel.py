@@ -7,7 +7,7 @@ from test_pose_fit import _scene_1080p
 
 from suture_bt.geometry import NeedleModel
 from suture_bt.perception.edge_kernel import edge_normal_equations
-from suture_bt.perception.edge_residuals import edge_jacobian, edge_rays, residuals_and_geometry
+from suture_bt.perception.edge_residuals import edge_jacobian, edge_rays, residuals
 from suture_bt.perception.fit_solver import FD_STEPS, _irls_weights
 from suture_bt.perception.mask_view import edge_points
 from suture_bt.perception.needle_projection import params_to_pose, pose_to_params
@@ -31,9 +31,9 @@ def _poses_near_the_needle(n: int = 24):
 @pytest.mark.parametrize("loss", ["cauchy", "geman_mcclure"])
 def test_kernel_matches_the_numpy_residuals_and_normal_equations(loss):
     rays, T, T6 = _poses_near_the_needle()
-    r, theta, geo = residuals_and_geometry(T, rays, MODEL)
+    r, theta = residuals(T, rays, MODEL)
     dT = (T6 - T[:, None]) / FD_STEPS[None, :, None, None]
-    J = edge_jacobian(T, dT, rays, MODEL, theta, geo)
+    J = edge_jacobian(T, dT, rays, MODEL, theta)
     w = _irls_weights(r, 1.0, loss)
     w = np.where(np.isfinite(w), w, 0.0)
     J = np.where(np.isfinite(J), J, 0.0)
@@ -55,10 +55,10 @@ def test_kernel_matches_the_numpy_residuals_and_normal_equations(loss):
 
 def test_seeded_search_matches_and_residuals_alone_leave_the_system_empty():
     rays, T, _ = _poses_near_the_needle()
-    _, theta, geo = residuals_and_geometry(T, rays, MODEL)
+    _, theta = residuals(T, rays, MODEL)
     moved = T.copy()
     moved[:, :3, 3] += 2e-4  # a nearby pose, searched from the previous angles
-    r, th, _ = residuals_and_geometry(moved, rays, MODEL, theta_start=theta, start_cs=geo[2:4])
+    r, th = residuals(moved, rays, MODEL, theta_start=theta)
     rk, thk, csk, Ak, gk = edge_normal_equations(
         moved, None, FD_STEPS, rays, MODEL, 1.0, "cauchy", theta
     )
@@ -67,6 +67,6 @@ def test_seeded_search_matches_and_residuals_alone_leave_the_system_empty():
     np.testing.assert_allclose(csk, [np.cos(thk), np.sin(thk)], atol=1e-14)
     assert not Ak.any() and not gk.any()
     # A coarse grid (the start scoring's) is honoured.
-    r12, _ = residuals_and_geometry(T, rays, MODEL, grid=12)[:2]
+    r12, _ = residuals(T, rays, MODEL, grid=12)
     rk12 = edge_normal_equations(T, None, FD_STEPS, rays, MODEL, 1.0, "cauchy", grid=12)[0]
     np.testing.assert_allclose(rk12[:-1], r12[:-1], atol=1e-6)

@@ -77,15 +77,13 @@ def _arc_f(theta, o, d, r):
     return a * a + b * b + o[2] * o[2] - qd * qd, qd
 
 
-def _newton_step(theta, o, d, od, r, cs=None):
+def _newton_step(theta, o, d, od, r):
     """Newton step f'/f'' of the squared ray distance f in theta, 0 where f is not convex.
 
     With u = cos θ d0 + sin θ d1, v = cos θ d1 - sin θ d0 and the along-ray distance
     qd = r u - o·d: f'/2r = o0 sin θ - o1 cos θ - qd v, f''/2r = o0 cos θ + o1 sin θ - r v² + qd u.
-    ``cs``: (cos θ, sin θ) when already known (numpy's float64 cos and sin are libm's, per
-    element, and cost more than the rest of the step together).
     """
-    c, s = (np.cos(theta), np.sin(theta)) if cs is None else cs
+    c, s = np.cos(theta), np.sin(theta)
     u = c * d[0] + s * d[1]
     v = c * d[1] - s * d[0]
     qd = r * u - od
@@ -100,12 +98,10 @@ def nearest_arc_angle(
     model: NeedleModel,
     grid: int = N_THETA_GRID,
     start: np.ndarray | None = None,
-    start_cs: tuple[np.ndarray, np.ndarray] | None = None,
 ):
     """Arc angle (K, N) of the centre-line point nearest each ray (clamped to the arc's ends).
 
-    A grid search then Newton steps; with ``start`` (angles of a nearby pose) Newton only,
-    ``start_cs`` being their cosines and sines if known.
+    A grid search then Newton steps; with ``start`` (angles of a nearby pose) Newton only.
     ``o``, ``d`` are component first (see :func:`_to_needle`).
     """
     lo, hi = model.tip_angle, model.base_angle
@@ -123,12 +119,11 @@ def nearest_arc_angle(
         q *= q
         m *= -2 * r
         m -= q
-        best = np.argmin(m, -1)
-        theta, cs0 = g[best], (cs[0][best], cs[1][best])
+        theta = g[np.argmin(m, -1)]
     else:
-        theta, cs0 = start, start_cs
-    for i in range(2):
-        step = _newton_step(theta, o, d, od, r, cs0 if i == 0 else None)
+        theta = start
+    for _ in range(2):
+        step = _newton_step(theta, o, d, od, r)
         step = np.clip(step, -(hi - lo) / grid, (hi - lo) / grid)
         theta = np.clip(theta - step, lo, hi)
     return theta
@@ -147,35 +142,14 @@ def residuals(
     ``theta`` fixes the nearest-point angles; ``theta_start`` seeds their Newton search from a
     nearby pose's angles.
     """
-    r, theta, _ = residuals_and_geometry(T, rays, model, theta, theta_start, grid)
-    return r, theta
-
-
-def residuals_and_geometry(
-    T: np.ndarray,
-    rays: EdgeRays,
-    model: NeedleModel,
-    theta: np.ndarray | None = None,
-    theta_start: np.ndarray | None = None,
-    grid: int = N_THETA_GRID,
-    start_cs: tuple[np.ndarray, np.ndarray] | None = None,
-):
-    """:func:`residuals` and the per-ray quantities behind them (``[o, d, cos θ, sin θ, a, b,
-    qd]``), which :func:`edge_jacobian` at the same poses and angles reuses rather than
-    recomputes; ``start_cs``: cos and sin of ``theta_start``."""
     o, d = _to_needle(T, rays)
     if theta is None:
-        theta = nearest_arc_angle(o, d, model, grid=grid, start=theta_start, start_cs=start_cs)
-    # _arc_f, keeping its intermediates.
-    c, s = np.cos(theta), np.sin(theta)
-    rad = model.radius
-    a, b = rad * c - o[0], rad * s - o[1]
-    qd = a * d[0] + b * d[1] - o[2] * d[2]
-    f = a * a + b * b + o[2] * o[2] - qd * qd
+        theta = nearest_arc_angle(o, d, model, grid=grid, start=theta_start)
+    f, qd = _arc_f(theta, o, d, model.radius)
     dist = np.sqrt(np.maximum(f, 0.0))
     depth = qd * rays.dz[None]
     r = (dist - model.wire_radius) * rays.focal[None] / np.where(depth > 1e-6, depth, np.nan)
-    return r, theta, [o, d, c, s, a, b, qd]
+    return r, theta
 
 
 def edge_jacobian(
@@ -184,7 +158,6 @@ def edge_jacobian(
     rays: EdgeRays,
     model: NeedleModel,
     theta: np.ndarray,
-    geometry: list | None = None,
 ) -> np.ndarray:
     """Jacobian (K, P, N) of the edge residuals at poses T (K, 4, 4), given the poses'
     derivatives dT (K, P, 4, 4) in P parameters.
@@ -195,16 +168,11 @@ def edge_jacobian(
     e = a - qd d and residual r = (|e| - wire radius) f / (qd d_z):
     dr/dX = f / (qd d_z) (e / |e| - (|e| - wire radius) / qd · d). With X = R P(θ) + p, in the
     needle frame R^T dX = (R^T dR) P + R^T dp: one small batched matrix product per start.
-    ``geometry``: :func:`residuals_and_geometry`'s quantities at these poses and angles.
     """
-    if geometry is None:
-        o, d = _to_needle(T, rays)
-        c, s = np.cos(theta), np.sin(theta)
-        a0, a1 = model.radius * c - o[0], model.radius * s - o[1]
-        # The same bits as a0 d0 + a1 d1 + (-o2) d2 (negation is exact).
-        qd = a0 * d[0] + a1 * d[1] - o[2] * d[2]
-    else:
-        o, d, c, s, a0, a1, qd = geometry
+    o, d = _to_needle(T, rays)
+    c, s = np.cos(theta), np.sin(theta)
+    a0, a1 = model.radius * c - o[0], model.radius * s - o[1]
+    qd = a0 * d[0] + a1 * d[1] - o[2] * d[2]
     P = (model.radius * c, model.radius * s)
     a = (a0, a1, -o[2])
     e = [a[i] - qd * d[i] for i in range(3)]
