@@ -9,14 +9,15 @@ from suture_bt.geometry import NeedleModel
 from suture_bt.perception.edge_residuals import edge_rays
 from suture_bt.perception.fit_solver import FD_STEPS, _pose_derivatives, pose_uncertainty
 from suture_bt.perception.mask_view import edge_points
-from suture_bt.perception.needle_prior import HeldPrior, PortPrior, PredictedPosePrior
-from suture_bt.perception.needle_projection import params_to_pose, pose_to_params
-from suture_bt.perception.prior_term import (
-    PRIOR_PX,
-    PriorTerm,
+from suture_bt.perception.needle_prior import (
+    HeldPrior,
+    PortPrior,
+    PredictedPosePrior,
+    arc_distance,
     arc_offsets,
-    prior_information,
 )
+from suture_bt.perception.needle_projection import params_to_pose, pose_to_params
+from suture_bt.perception.prior_term import PRIOR_PX, PriorTerm, prior_information
 
 MODEL = NeedleModel()
 
@@ -37,6 +38,12 @@ def test_arc_offsets_are_zero_on_the_arc_and_measure_the_miss_off_it():
     past_tip = np.array([np.sin(MODEL.tip_angle), -np.cos(MODEL.tip_angle), 0.0])
     beyond = _world(T, MODEL.tip + 0.002 * past_tip)
     assert np.isclose(np.linalg.norm(arc_offsets(T[None], beyond[None], MODEL)[0, 0]), 0.002)
+    # Just past the base (arc angle π, so its angle wraps to -π + ε): the base is nearest, not
+    # the tip a clamp of the wrapped angle would give; arc_distance is the same measure.
+    past_base = _world(T, MODEL.base + 0.002 * np.array([0.0, -1.0, 0.0]))
+    d = arc_offsets(T[None], past_base[None], MODEL)[0, 0]
+    np.testing.assert_allclose(_world(T, MODEL.base) - past_base, d, atol=1e-12)
+    assert np.isclose(arc_distance(past_base, T, MODEL), 0.002)
 
 
 def test_prior_term_counts_a_miss_of_one_tolerance_as_prior_px():

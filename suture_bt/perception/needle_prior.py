@@ -37,15 +37,26 @@ class PriorContradicted(NeedleNotFound):
     """No pose that explains the images agrees with the caller's prior; ``reason`` says why."""
 
 
+def arc_offsets(T: np.ndarray, points: np.ndarray, model: NeedleModel) -> np.ndarray:
+    """Vectors (K, P, 3), in the poses' frame, from each point (P, 3) to the nearest point of
+    the needle's centre-line arc at each pose (K, 4, 4): on the circle within the arc's span,
+    else the nearer end (the distance grows with the angle past either end)."""
+    R, t = T[:, :3, :3], T[:, :3, 3]
+    p = np.einsum("kji,kpj->kpi", R, points[None] - t[:, None])  # needle frame
+    theta = np.arctan2(p[..., 1], p[..., 0])
+    on_circle = model.radius * np.stack([np.cos(theta), np.sin(theta), 0 * theta], -1)
+    ends = np.stack([model.tip, model.base])  # (2, 3)
+    to_ends = np.linalg.norm(p[..., None, :] - ends, axis=-1)  # (K, P, 2)
+    end = ends[np.argmin(to_ends, -1)]
+    inside = (theta >= model.tip_angle) & (theta <= model.base_angle)
+    near = np.where(inside[..., None], on_circle, end)
+    return np.einsum("kij,kpj->kpi", R, near - p)
+
+
 def arc_distance(point_world: np.ndarray, T_world_needle: np.ndarray, model: NeedleModel) -> float:
     """Distance (m) from a world point to the needle's centre-line arc at a pose (exact)."""
-    R, t = T_world_needle[:3, :3], T_world_needle[:3, 3]
-    p = R.T @ (np.asarray(point_world, float) - t)
-    theta = float(np.arctan2(p[1], p[0]))
-    if model.tip_angle <= theta <= model.base_angle:
-        return float(np.hypot(np.hypot(p[0], p[1]) - model.radius, p[2]))
-    # Outside the arc's span the nearest point is an end (the distance grows with the angle).
-    return float(min(np.linalg.norm(p - model.tip), np.linalg.norm(p - model.base)))
+    point = np.asarray(point_world, float)[None]
+    return float(np.linalg.norm(arc_offsets(np.asarray(T_world_needle)[None], point, model)))
 
 
 def _swap_rotation(model: NeedleModel) -> np.ndarray:

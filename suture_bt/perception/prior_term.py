@@ -16,7 +16,7 @@ from collections.abc import Sequence
 import numpy as np
 
 from suture_bt.geometry import NeedleModel
-from suture_bt.perception.needle_prior import HeldPrior, NeedlePrior, PortPrior
+from suture_bt.perception.needle_prior import HeldPrior, NeedlePrior, PortPrior, arc_offsets
 
 #: Pixels a miss of one tolerance counts as in the polish (about the spread of the edge
 #: residuals there), so a prior weighs like an edge point as well placed as its tolerance says.
@@ -26,16 +26,6 @@ PRIOR_PX = 0.3
 #: task sets (seed 6173, with priors): 1 → 4 took held_presented from 0.36 to 0.30° and in a
 #: port from 0.48 to 0.44° mean, the same answers right (without the term 0.42° and 0.51°).
 PRIOR_WEIGHT = 4.0
-
-
-def arc_offsets(T: np.ndarray, points: np.ndarray, model: NeedleModel) -> np.ndarray:
-    """Vectors (K, P, 3), in the poses' frame, from each point (P, 3) to the nearest point of
-    the needle's centre-line arc at each pose (K, 4, 4) (an end beyond the arc's span)."""
-    R, t = T[:, :3, :3], T[:, :3, 3]
-    p = np.einsum("kji,kpj->kpi", R, points[None] - t[:, None])  # needle frame
-    theta = np.clip(np.arctan2(p[..., 1], p[..., 0]), model.tip_angle, model.base_angle)
-    near = model.radius * np.stack([np.cos(theta), np.sin(theta), np.zeros_like(theta)], -1)
-    return np.einsum("kij,kpj->kpi", R, near - p)
 
 
 class PriorTerm:
