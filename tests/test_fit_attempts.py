@@ -4,10 +4,10 @@ reasons, and a clean outline is answered."""
 import numpy as np
 import pytest
 from perception_helpers import pose_errors
-from test_pose_fit import MODEL, _scene_1080p
+from test_pose_fit import MODEL, _scene_1080p, _tip_hidden
 
 from suture_bt.perception.colour_refine import ColourRule
-from suture_bt.perception.fit_attempts import FitAttempts, _same_pair
+from suture_bt.perception.fit_attempts import MAX_RIVAL_RATIO, FitAttempts, _same_pair
 from suture_bt.perception.pose_fit import NeedleNotFound, PoseFitter
 
 
@@ -39,3 +39,17 @@ def test_a_clean_outline_is_answered_and_each_gate_refuses_with_its_reason():
         _attempts(st, max_rms_px=0.0)(*args)
     with pytest.raises(NeedleNotFound, match="leaves the pose loose"):
         _attempts(st, max_angle_std_deg=0.0)(*args)
+
+
+def test_an_answer_with_a_close_rival_is_refused_with_its_reason():
+    """Half the needle hidden: a turned pose explains the seen piece as well (see
+    test_rival_probe), so the answer is refused, naming the rival's offset and cost."""
+    st, T, left, right, ends = _scene_1080p(4, 0.0)
+    occ, short, _ = _tip_hidden(st, T, left, right, ends)
+    images = tuple(np.zeros((1080, 1920, 3), np.uint8) for _ in range(2))
+    args = (images, tuple(occ), short, None, 2.0, None, np.stack([short, short]), np.zeros((2, 2)))
+    loose = dict(max_angle_std_deg=float("inf"))
+    with pytest.raises(NeedleNotFound, match="another pose .* explains the outline almost as well"):
+        _attempts(st, **loose)(*args)
+    fit = _attempts(st, max_rival_ratio=0.0, **loose)(*args)
+    assert fit.rival_ratio <= MAX_RIVAL_RATIO

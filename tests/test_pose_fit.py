@@ -191,7 +191,7 @@ def test_final_candidates_are_clearly_different_solutions(n_final):
     which may bring them a little closer), and the ambiguity is the cost gap to the nearest."""
     st, T, left, right, ends = _scene_1080p(4, 0.0)
     occ, short, _ = _tip_hidden(st, T, left, right, ends)
-    res = PoseFitter(st, MODEL, n_final=n_final).fit(*occ, short)
+    res = PoseFitter(st, MODEL, n_final=n_final, probe_rivals=False).fit(*occ, short)
     assert len(res.candidates) == n_final
     for i, a in enumerate(res.candidates):
         for b in res.candidates[i + 1 :]:
@@ -213,7 +213,7 @@ def test_pruning_to_one_second_stage_start_still_recovers_the_pose():
     """The cheap first stage ranks the starts well enough that keeping its best one works on
     a clean mask (the default keeps several for occluded needles)."""
     st, T, left, right, ends = _scene_1080p(8, 2.0)
-    res = PoseFitter(st, MODEL, n_second_stage=1).fit(left, right, tuple(ends))
+    res = PoseFitter(st, MODEL, n_second_stage=1, probe_rivals=False).fit(left, right, tuple(ends))
     assert len(res.candidates) == 1 and res.ambiguity == float("inf")
     pos, ang = pose_errors(res.T_cam_needle, T)
     assert pos < 0.5 and ang < 1.5

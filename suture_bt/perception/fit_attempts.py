@@ -1,5 +1,6 @@
 """The localiser's fit stage: the end hypotheses the images offer, the fit from them, a
-refit when the first fails, and the gates on the answer (RMS, inliers, predicted spread).
+refit when the first fails, and the gates on the answer (RMS, inliers, predicted spread, a
+rival pose of near-equal cost).
 
 Hypotheses: the keypoints (with their stereo depth), ends that touch an occluder pushed on
 behind it (:mod:`occlusion`), a confident keypoint with the visible piece's far end, the
@@ -23,6 +24,7 @@ from suture_bt.perception.needle_ends import band_pixels
 from suture_bt.perception.needle_prior import PriorContradicted, seed_poses
 from suture_bt.perception.occlusion import anchored_ends, end_is_occluded, extended_ends
 from suture_bt.perception.pose_fit import NeedleNotFound, PoseFitResult, PoseFitter, mask_ends
+from suture_bt.perception.rival_probe import MAX_RIVAL_RATIO
 
 #: A keypoint this confident anchors its end even when the other end's keypoint is weak
 #: (then the other end is sought at, and behind, the visible piece's far end).
@@ -53,7 +55,8 @@ def _same_pair(a, b, tol_px: float = 3.0) -> bool:
 class FitAttempts:
     """The fit stage (see the module docstring) with the localiser's cameras, model, colour
     rule and fitter; answers worse than ``max_rms_px`` RMS, explaining less than
-    MIN_INLIER_FRACTION of the edge or looser than ``max_angle_std_deg`` are refused."""
+    MIN_INLIER_FRACTION of the edge, looser than ``max_angle_std_deg`` or with a clearly
+    different pose within ``max_rival_ratio`` of their cost (:mod:`rival_probe`) are refused."""
 
     stereo: StereoCameraModel
     model: NeedleModel
@@ -61,6 +64,7 @@ class FitAttempts:
     fitter: PoseFitter
     max_rms_px: float = MAX_RMS_PX
     max_angle_std_deg: float = 2.0
+    max_rival_ratio: float = MAX_RIVAL_RATIO
 
     def __call__(
         self, images, views, ends, depth, half_width, previous, kp, score, priors=()
@@ -160,5 +164,13 @@ class FitAttempts:
                 f"the seen part leaves the pose loose: predicted angle spread "
                 f"{fit.angle_std_deg:.1f} deg (> {limit:.1f}; position "
                 f"{fit.position_std_mm:.1f} mm): too little of the needle's curve is seen"
+            )
+        if fit.rival_offset is not None and fit.rival_ratio <= self.max_rival_ratio:
+            mm, deg = fit.rival_offset
+            ratio, limit = fit.rival_ratio, self.max_rival_ratio
+            raise NeedleNotFound(
+                f"another pose {mm:.1f} mm / {deg:.0f} deg away explains the outline almost as "
+                f"well (cost {ratio:.2f}x the answer's, limit {limit:.2f}): the seen part does "
+                "not pin the pose"
             )
         return fit

@@ -33,6 +33,7 @@ from suture_bt.perception.base_or_tip import BaseTipChooser
 from suture_bt.perception.colour_refine import ColourRule
 from suture_bt.perception.exposure_gate import MAX_EXPOSED, ExposureGate
 from suture_bt.perception.fit_attempts import (  # noqa: F401 - gates, re-exported
+    MAX_RIVAL_RATIO,
     MAX_RMS_PX,
     MIN_INLIER_FRACTION,
     STRONG_KEYPOINT_SCORE,
@@ -141,6 +142,8 @@ class NeedleLocalizer:
         self.max_rms_px = max_rms_px
         self.max_angle_std_deg = max_angle_std_deg
         self.max_angle_std_deg_held = max_angle_std_deg_held
+        #: A clearly different pose within this ratio of the answer's cost refuses it.
+        self.max_rival_ratio = MAX_RIVAL_RATIO
         self.tissue = tissue
         self.max_exposed = max_exposed
         self.fitter = PoseFitter(stereo, self.model, depth_range=(MIN_DEPTH, MAX_DEPTH))
@@ -331,6 +334,7 @@ class NeedleLocalizer:
             self.fitter,
             self.max_rms_px,
             self._angle_std_limit(priors),
+            self.max_rival_ratio,
         )
         return attempts(images, views, ends, depth, half_width, previous, kp, score, priors)
 

@@ -61,6 +61,7 @@ from suture_bt.perception.needle_projection import (
 )
 from suture_bt.perception.prior_term import PriorTerm
 from suture_bt.perception.refusal import NeedleNotFound
+from suture_bt.perception.rival_probe import FitRays, RivalProbe, rival
 
 #: A clearly different second-stage pose costing at most this much more than the best also
 #: seeds the second search (1.3 gave the same answers on the benchmarks for 10 ms more).
@@ -94,6 +95,10 @@ class PoseFitResult:
     position_std_mm: float = float("nan")
     #: The chosen pose's miss of each prior given, over its tolerance (≤ 1; empty: none).
     prior_misses: tuple[float, ...] = ()
+    #: Cost of the cheapest clearly different pose (:mod:`rival_probe`) over the answer's
+    #: (inf: none found), and its offset from the answer (mm, deg).
+    rival_ratio: float = float("inf")
+    rival_offset: tuple[float, float] | None = None
 
 
 def _rot_angle(Ra: np.ndarray, Rb: np.ndarray) -> float:
@@ -143,6 +148,9 @@ class PoseFitter:
     #: Whether the priors' points (pinch, port) join the polish as a soft term and the
     #: predicted spread (:mod:`prior_term`).
     prior_polish: bool = True
+    #: Whether the answer is probed for clearly different poses of near-equal cost
+    #: (:mod:`rival_probe`; a cheaper one becomes the answer).
+    probe_rivals: bool = True
 
     def fit(
         self,
@@ -281,22 +289,26 @@ class PoseFitter:
         cf = np.where(self._in_range(xf), cf, np.inf)
         if not np.isfinite(cf).any():
             raise NeedleNotFound("pose fit diverged")
-        misses = None
-        if priors:
-            T_world = cam.T_world_cam[None] @ params_to_pose(xf, cam, self.model)
-            misses = prior_misses(priors, T_world, self.model)
-            ok = consistent(misses) & np.isfinite(cf)
-            if not ok.any():
-                raise contradiction(priors, misses[np.isfinite(cf)])
-            b = int(np.argmin(np.where(ok, cf, np.inf)))
-        else:
-            b = int(np.argmin(cf))
+        b, ok, misses = self._choose(xf, cf, priors)
+        amb = float(np.min(np.delete(cf, b)) - cf[b]) if len(cf) > 1 else float("inf")
+        # Rivals are the probe's poses (and the first answer, if one of them replaces it):
+        # the other finals are separate basins, mostly the mirror twin, whose small cost gap
+        # decides reliably on a whole outline (its own refusals: the priors, the spread).
+        near = np.zeros(len(xf), bool)
+        if self.probe_rivals:
+            probe = RivalProbe(self.stereo, self.model)
+            xp, cp = probe(xf[b], FitRays(rays, coarse, mid), polish, self.final_loss)
+            near = np.concatenate([near, np.ones(len(xp), bool)])
+            near[b] = True
+            xf = np.concatenate([xf, xp])
+            cf = np.concatenate([cf, np.where(self._in_range(xp), cp, np.inf)])
+            b, ok, misses = self._choose(xf, cf, priors)
+        rival_ratio, rival_offset = rival(b, params_to_pose(xf, cam, self.model), cf, ok & near)
         T = params_to_pose(xf[b], cam, self.model)
         r, _ = residuals(T[None], rays, self.model)
         r = r[0]
         inl = np.abs(r) < 1.5
         rms = float(np.sqrt(np.mean(r[inl] ** 2))) if inl.any() else float("inf")
-        amb = float(np.min(np.delete(cf, b)) - cf[b]) if len(cf) > 1 else float("inf")
         ang_std, pos_std = pose_uncertainty(
             xf[b], rays, self.stereo, self.model, 1.0, self.final_loss, prior_term
         )
@@ -314,7 +326,22 @@ class PoseFitter:
             angle_std_deg=ang_std,
             position_std_mm=pos_std,
             prior_misses=() if misses is None else tuple(float(m) for m in misses[b]),
+            rival_ratio=rival_ratio,
+            rival_offset=rival_offset,
         )
+
+    def _choose(self, x: np.ndarray, c: np.ndarray, priors) -> tuple[int, np.ndarray, object]:
+        """The answer among polished rows: the best-cost one consistent with every prior (none
+        consistent: :class:`PriorContradicted`); also which rows may answer and the misses."""
+        if not priors:
+            return int(np.argmin(c)), np.isfinite(c), None
+        cam = self.stereo.left
+        T_world = cam.T_world_cam[None] @ params_to_pose(x, cam, self.model)
+        misses = prior_misses(priors, T_world, self.model)
+        ok = consistent(misses) & np.isfinite(c)
+        if not ok.any():
+            raise contradiction(priors, misses[np.isfinite(c)])
+        return int(np.argmin(np.where(ok, c, np.inf))), ok, misses
 
     def _with_consistent(self, finals: list, x: np.ndarray, c: np.ndarray, priors) -> list:
         """The polish's rows plus the best second-stage pose consistent with the priors when

@@ -1,0 +1,88 @@
+"""The rival probe: its starts turn the answer as documented, ``distinct`` draws the
+benchmark's line, ``rival`` picks the cheapest usable clearly different pose, and in a fit a
+clean outline leaves no close rival."""
+
+import numpy as np
+from perception_helpers import pose_errors
+from scipy.spatial.transform import Rotation
+from test_pose_fit import MODEL, _scene_1080p, _tip_hidden
+
+from suture_bt.perception.pose_fit import PoseFitter
+from suture_bt.perception.rival_probe import (
+    DISTINCT_DEG,
+    DISTINCT_MM,
+    MAX_RIVAL_RATIO,
+    PROBE_ANGLES_DEG,
+    distinct,
+    pose_offset,
+    probe_starts,
+    rival,
+)
+
+
+def _pose(rotvec_deg=(0.0, 0.0, 0.0), t=(0.0, 0.0, 0.1)) -> np.ndarray:
+    T = np.eye(4)
+    T[:3, :3] = Rotation.from_rotvec(np.deg2rad(rotvec_deg)).as_matrix()
+    T[:3, 3] = t
+    return T
+
+
+def test_probe_starts_turn_the_answer_by_the_probe_angles_about_two_pivots():
+    T = _pose((10.0, -20.0, 30.0))
+    starts = probe_starts(T, MODEL)
+    n_axes = 4
+    assert starts.shape == (2 * n_axes * len(PROBE_ANGLES_DEG), 4, 4)
+    angles = sorted({round(pose_offset(T, S)[1], 6) for S in starts})
+    assert np.allclose(angles, sorted({abs(a) for a in PROBE_ANGLES_DEG}))
+    # The first block turns about the arc centre: the centre stays put.
+    first = starts[: len(starts) // 2]
+    assert np.allclose(first[:, :3, 3], T[:3, 3])
+    # The second about the arc's middle point, which stays put in every start.
+    mid = 0.5 * (MODEL.base_angle + MODEL.tip_angle)
+    p = MODEL.point_at(np.array([mid]))[0]
+    for S in starts[len(starts) // 2 :]:
+        assert np.allclose(S[:3, :3] @ p + S[:3, 3], T[:3, :3] @ p + T[:3, 3])
+
+
+def test_distinct_is_the_accuracy_line():
+    T = _pose()
+    near = _pose((0.0, 0.8 * DISTINCT_DEG, 0.0), (0.0, 0.0, 0.1 + 0.8e-3 * DISTINCT_MM))
+    turned = _pose((0.0, 1.2 * DISTINCT_DEG, 0.0))
+    moved = _pose(t=(1.2e-3 * DISTINCT_MM, 0.0, 0.1))
+    assert not distinct(T, near)
+    assert distinct(T, turned) and distinct(T, moved)
+    mm, deg = pose_offset(T, moved)
+    assert np.isclose(mm, 1.2 * DISTINCT_MM) and np.isclose(deg, 0.0, atol=1e-6)
+
+
+def test_rival_is_the_cheapest_usable_clearly_different_pose():
+    poses = np.stack(
+        [_pose(), _pose((0.0, 1.0, 0.0)), _pose((0.0, 30.0, 0.0)), _pose((0.0, 20.0, 0.0))]
+    )
+    costs = np.array([1.0, 0.9, 1.1, 1.05])
+    usable = np.array([True, True, True, False])
+    ratio, offset = rival(0, poses, costs, usable)
+    # pose 1 is cheaper but the same answer; pose 3 is cheaper but unusable (a prior refuses it)
+    assert np.isclose(ratio, 1.1) and np.isclose(offset[1], 30.0)
+    assert rival(0, poses[:2], costs[:2], usable[:2]) == (float("inf"), None)
+
+
+def test_a_clean_outline_leaves_no_rival_within_the_limit():
+    st, T, left, right, ends = _scene_1080p(5, 2.0)
+    res = PoseFitter(st, MODEL).fit(left, right, tuple(ends))
+    assert res.rival_ratio > MAX_RIVAL_RATIO
+    pos, ang = pose_errors(res.T_cam_needle, T)
+    assert pos < 0.5 and ang < 1.5
+
+
+def test_a_needle_half_hidden_has_a_turned_rival_and_the_fit_says_so():
+    """With the tip half hidden the seen piece stays put while the pose turns about it: the
+    probe finds a pose clearly different from the answer at nearly its cost."""
+    st, T, left, right, ends = _scene_1080p(4, 0.0)
+    occ, short, _ = _tip_hidden(st, T, left, right, ends)
+    res = PoseFitter(st, MODEL).fit(*occ, short)
+    assert res.rival_ratio <= MAX_RIVAL_RATIO
+    mm, deg = res.rival_offset
+    assert mm > DISTINCT_MM or deg > DISTINCT_DEG
+    free = PoseFitter(st, MODEL, probe_rivals=False).fit(*occ, short)
+    assert free.rival_ratio == float("inf") and free.rival_offset is None
