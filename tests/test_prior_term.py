@@ -46,6 +46,18 @@ def test_arc_offsets_are_zero_on_the_arc_and_measure_the_miss_off_it():
     assert np.isclose(arc_distance(past_base, T, MODEL), 0.002)
 
 
+def test_the_compiled_term_measures_what_arc_offsets_does():
+    """PriorTerm's compiled offsets equal the reference :func:`arc_offsets` for points on,
+    off, and past either end of the arc, over many poses."""
+    rng = np.random.default_rng(4)
+    T = np.stack([random_needle_pose(rng, 0.03, 0.2) for _ in range(9)])
+    centre = T[0, :3, 3]
+    points = centre + rng.normal(0.0, 0.012, (40, 3))
+    priors = [HeldPrior("psm1", p, 0.002) for p in points]
+    term = PriorTerm(priors, np.eye(4), MODEL)
+    np.testing.assert_allclose(term.misses(T) * 0.002, arc_offsets(T, points, MODEL), atol=1e-15)
+
+
 def test_prior_term_counts_a_miss_of_one_tolerance_as_prior_px():
     st = stereo(640, 480)
     T_cam = random_needle_pose(np.random.default_rng(2), 0.06, 0.1)

@@ -2,7 +2,10 @@
 
 from __future__ import annotations
 
+import math
+
 import numpy as np
+from numba import njit
 
 from suture_bt.geometry import NeedleModel
 from suture_bt.interfaces import StereoCameraModel
@@ -80,7 +83,7 @@ class EndPriorTerm:
         self.eyes = []
         cams = (stereo.left, stereo.right)
         for cam, T_el, kp in zip(cams, _eye_transforms(stereo), keypoints, strict=True):
-            kp = np.asarray(kp, float).reshape(-1, 2)
+            kp = np.ascontiguousarray(np.asarray(kp, float).reshape(-1, 2))
             if len(kp):
                 self.eyes.append((cam, T_el, kp))
         self.n = sum(len(kp) for _, _, kp in self.eyes)
@@ -89,18 +92,45 @@ class EndPriorTerm:
         return self.n > 0
 
     def __call__(self, T: np.ndarray) -> np.ndarray:
-        out = []
-        for cam, T_el, kp in self.eyes:
-            u, v = _project_model_points(cam, T_el, T, self.ends)  # (K, 2) each
-            du = u[:, None, :] - kp[None, :, 0, None]  # (K, M, 2)
-            dv = v[:, None, :] - kp[None, :, 1, None]
-            d = np.sqrt(du * du + dv * dv)  # the bits of np.linalg.norm over (du, dv)
-            out.append(np.minimum(d[..., 0], d[..., 1]))
+        T = np.ascontiguousarray(T, dtype=np.float64)
+        out = [
+            _nearer_end_distances(T, T_el, cam.fx, cam.fy, cam.cx, cam.cy, self.ends, kp)
+            for cam, T_el, kp in self.eyes
+        ]
         return np.concatenate(out, -1)
 
     def column_weights(self, n_edge: int) -> np.ndarray:
         """All keypoints together weigh END_PRIOR_SHARE of all the edge points."""
         return np.full(self.n, END_PRIOR_SHARE * n_edge / self.n)
+
+
+@njit(cache=True)
+def _nearer_end_distances(T, T_eye_left, fx, fy, cx, cy, ends, kp):
+    """(K, M) pixel distance from each keypoint (M, 2) to the nearer of the two model ends
+    (2, 3, needle frame) projected into one eye under each pose T (K, 4, 4, left frame):
+    the arithmetic of :func:`_project_model_points` per pose, compiled (in numpy the small
+    arrays' call overhead was most of the fit's extra-term time)."""
+    K, M = T.shape[0], kp.shape[0]
+    out = np.empty((K, M))
+    uv = np.empty((2, 2))
+    for k in range(K):
+        for e in range(2):
+            # the end in the left frame (T), then in this eye's (T_eye_left)
+            a, b, c = ends[e, 0], ends[e, 1], ends[e, 2]
+            p0 = T[k, 0, 0] * a + T[k, 0, 1] * b + T[k, 0, 2] * c + T[k, 0, 3]
+            p1 = T[k, 1, 0] * a + T[k, 1, 1] * b + T[k, 1, 2] * c + T[k, 1, 3]
+            p2 = T[k, 2, 0] * a + T[k, 2, 1] * b + T[k, 2, 2] * c + T[k, 2, 3]
+            E = T_eye_left
+            x = E[0, 0] * p0 + E[0, 1] * p1 + E[0, 2] * p2 + E[0, 3]
+            y = E[1, 0] * p0 + E[1, 1] * p1 + E[1, 2] * p2 + E[1, 3]
+            z = max(E[2, 0] * p0 + E[2, 1] * p1 + E[2, 2] * p2 + E[2, 3], 1e-6)
+            uv[e, 0] = fx * x / z + cx
+            uv[e, 1] = fy * y / z + cy
+        for m in range(M):
+            d0 = math.hypot(uv[0, 0] - kp[m, 0], uv[0, 1] - kp[m, 1])
+            d1 = math.hypot(uv[1, 0] - kp[m, 0], uv[1, 1] - kp[m, 1])
+            out[k, m] = min(d0, d1)
+    return out
 
 
 def _bilinear(img: np.ndarray, u: np.ndarray, v: np.ndarray) -> np.ndarray:

@@ -87,6 +87,9 @@ class RivalProbe:
     stereo: object
     model: NeedleModel
     iterations: tuple[int, int, int] = (6, 6, 6)
+    #: Probes carried from the coarse edge subset to the mid one (the cheapest clearly
+    #: different from the answer; the mid stage is most of the probe's cost).
+    n_mid: int = 8
     n_polish: int = 2
 
     def __call__(
@@ -99,20 +102,26 @@ class RivalProbe:
         T_answer = params_to_pose(np.asarray(x_answer)[None], cam, self.model)[0]
         x = pose_to_params(probe_starts(T_answer, self.model), cam, self.model)
         it1, it2, it3 = self.iterations
-        x, _ = levenberg_marquardt(x, rays.coarse, self.stereo, self.model, it1, 1.0, terms)
+        x, c = levenberg_marquardt(x, rays.coarse, self.stereo, self.model, it1, 1.0, terms)
+        x = x[self._distinct(x, c, T_answer, self.n_mid)]
+        if not len(x):
+            return np.zeros((0, 6)), np.zeros(0)
         x, c = levenberg_marquardt(x, rays.mid, self.stereo, self.model, it2, 1.0, terms)
-        T = params_to_pose(x, cam, self.model)
+        x = x[self._distinct(x, c, T_answer, self.n_polish)]
+        if not len(x):
+            return np.zeros((0, 6)), np.zeros(0)
+        return levenberg_marquardt(x, rays.all, self.stereo, self.model, it3, 1.0, terms, loss)
+
+    def _distinct(self, x: np.ndarray, c: np.ndarray, T_answer: np.ndarray, n: int) -> list:
+        """Indices of the n cheapest rows clearly different from the answer and each other."""
+        T = params_to_pose(x, self.stereo.left, self.model)
         keep: list[int] = []
         for j in np.argsort(c):
-            if len(keep) == self.n_polish or not np.isfinite(c[j]):
+            if len(keep) == n or not np.isfinite(c[j]):
                 break
             if distinct(T[j], T_answer) and all(distinct(T[j], T[k]) for k in keep):
                 keep.append(int(j))
-        if not keep:
-            return np.zeros((0, 6)), np.zeros(0)
-        return levenberg_marquardt(
-            x[keep], rays.all, self.stereo, self.model, it3, 1.0, terms, loss
-        )
+        return keep
 
 
 def rival(
