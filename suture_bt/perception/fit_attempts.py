@@ -19,11 +19,12 @@ from suture_bt.geometry import NeedleModel
 from suture_bt.interfaces import StereoCameraModel
 from suture_bt.perception.base_or_tip import occlusion_radius
 from suture_bt.perception.colour_refine import ColourRule
+from suture_bt.perception.edge_samples import mask_ends
 from suture_bt.perception.geodesic_ends import geodesic_ends
 from suture_bt.perception.needle_ends import band_pixels
 from suture_bt.perception.needle_prior import PriorContradicted, seed_poses
 from suture_bt.perception.occlusion import anchored_ends, end_is_occluded, extended_ends
-from suture_bt.perception.pose_fit import NeedleNotFound, PoseFitResult, PoseFitter, mask_ends
+from suture_bt.perception.pose_fit import NeedleNotFound, PoseFitResult, PoseFitter
 from suture_bt.perception.rival_probe import MAX_RIVAL_RATIO
 
 #: A keypoint this confident anchors its end even when the other end's keypoint is weak

@@ -232,6 +232,32 @@ def contradiction(priors: Sequence[NeedlePrior], misses: np.ndarray) -> PriorCon
     return PriorContradicted("; ".join(parts))
 
 
+def choose_answer(
+    T_world: np.ndarray, costs: np.ndarray, priors: Sequence[NeedlePrior], model: NeedleModel
+) -> tuple[int, np.ndarray, np.ndarray | None]:
+    """The answer among polished poses (K, 4, 4): the best-cost one consistent with every
+    prior (none consistent: :class:`PriorContradicted`), which poses may answer, and the
+    misses (K, P; None without priors)."""
+    if not priors:
+        return int(np.argmin(costs)), np.isfinite(costs), None
+    misses = prior_misses(priors, T_world, model)
+    ok = consistent(misses) & np.isfinite(costs)
+    if not ok.any():
+        raise contradiction(priors, misses[np.isfinite(costs)])
+    return int(np.argmin(np.where(ok, costs, np.inf))), ok, misses
+
+
+def with_consistent(
+    finals: list, T_world: np.ndarray, costs: np.ndarray, priors, model: NeedleModel
+) -> list:
+    """The polish's rows ``finals`` plus the best pose consistent with the priors when none of
+    them is (a worse-cost twin the usual choice of finals leaves out)."""
+    ok = consistent(prior_misses(priors, T_world, model)) & np.isfinite(costs)
+    if ok.any() and not ok[finals].any():
+        finals = [*finals, int(np.argmin(np.where(ok, costs, np.inf)))]
+    return finals
+
+
 def check_across_jaws(priors: Sequence[NeedlePrior], T_world: np.ndarray, decided_by: str) -> None:
     """Refuse when, with base and tip told apart, the needle's face is turned against a
     holder's jaws (the signed :class:`AcrossJawsPrior` test: a mirror twin, or the ends

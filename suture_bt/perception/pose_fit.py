@@ -12,6 +12,7 @@ tilt-mirror ambiguity), on the parameters of :mod:`needle_projection`: Cauchy wh
 (wide basins), Geman-McClure for the final polish and choice, so a few stray mask pixels (a
 sliver of jaw the colour test kept) cannot pull the answer onto a pose that half-explains them.
 Optional extra terms: free space (experimental, off) and confident keypoints (search only).
+The answer is then probed for a clearly different pose of near-equal cost (:mod:`rival_probe`).
 """
 
 from __future__ import annotations
@@ -34,6 +35,12 @@ from suture_bt.perception.edge_residuals import (  # noqa: F401 - re-exported
     nearest_arc_angle,
     residuals,
 )
+from suture_bt.perception.edge_samples import (  # noqa: F401 - mask_ends re-exported
+    balanced,
+    farthest_pair,
+    mask_ends,
+    subsample,
+)
 from suture_bt.perception.fit_solver import (  # noqa: F401 - re-exported
     FD_STEPS,
     LOSSES,
@@ -47,12 +54,7 @@ from suture_bt.perception.fit_terms import (  # noqa: F401 - re-exported
     FreeSpaceTerm,
 )
 from suture_bt.perception.mask_view import MaskView, edge_points
-from suture_bt.perception.needle_prior import (
-    NeedlePrior,
-    consistent,
-    contradiction,
-    prior_misses,
-)
+from suture_bt.perception.needle_prior import NeedlePrior, choose_answer, with_consistent
 from suture_bt.perception.needle_projection import (
     end_pixels,
     params_to_pose,
@@ -193,12 +195,12 @@ class PoseFitter:
                 f"too few needle edge points (left {len(el)}, right {len(er)}, "
                 f"need {self.min_edge_points} each)"
             )
-        el = _subsample(el, self.max_points_per_eye, rng)
-        er = _subsample(er, self.max_points_per_eye, rng)
+        el = subsample(el, self.max_points_per_eye, rng)
+        er = subsample(er, self.max_points_per_eye, rng)
         rays = edge_rays(self.stereo, el, er)
         nl = len(el)
-        coarse = rays.subset(_balanced(nl, len(er), self.coarse_points_per_eye, rng))
-        mid = rays.subset(_balanced(nl, len(er), self.mid_points_per_eye, rng))
+        coarse = rays.subset(balanced(nl, len(er), self.coarse_points_per_eye, rng))
+        mid = rays.subset(balanced(nl, len(er), self.mid_points_per_eye, rng))
         cam = self.stereo.left
         if endpoints_left is None and warm_start is not None:
             endpoints_left = tuple(end_pixels(cam, np.asarray(warm_start), self.model))
@@ -213,7 +215,7 @@ class PoseFitter:
         def best_starts(ends, hint, n: int) -> np.ndarray:
             """The n lowest-cost feasible starts (coarse edge subset) for one end hypothesis."""
             if ends is None:
-                ends = _farthest_pair(el, rng)
+                ends = farthest_pair(el, rng)
             ub, ut = (np.asarray(e, float) for e in ends)
             return lowest(self._starts(ub, ut, hint), n)
 
@@ -278,7 +280,7 @@ class PoseFitter:
                 finals.append(k)
                 kept.append(j)
         if priors:
-            finals = self._with_consistent(finals, x, c, priors)
+            finals = with_consistent(finals, self._world(x), c, priors, self.model)
         polish = [t for t in terms if t.polish]
         prior_term = PriorTerm(priors, cam.T_cam_world, self.model) if self.prior_polish else None
         if prior_term:
@@ -289,7 +291,7 @@ class PoseFitter:
         cf = np.where(self._in_range(xf), cf, np.inf)
         if not np.isfinite(cf).any():
             raise NeedleNotFound("pose fit diverged")
-        b, ok, misses = self._choose(xf, cf, priors)
+        b, ok, misses = choose_answer(self._world(xf), cf, priors, self.model)
         amb = float(np.min(np.delete(cf, b)) - cf[b]) if len(cf) > 1 else float("inf")
         # Rivals are the probe's poses (and the first answer, if one of them replaces it):
         # the other finals are separate basins, mostly the mirror twin, whose small cost gap
@@ -302,7 +304,7 @@ class PoseFitter:
             near[b] = True
             xf = np.concatenate([xf, xp])
             cf = np.concatenate([cf, np.where(self._in_range(xp), cp, np.inf)])
-            b, ok, misses = self._choose(xf, cf, priors)
+            b, ok, misses = choose_answer(self._world(xf), cf, priors, self.model)
         rival_ratio, rival_offset = rival(b, params_to_pose(xf, cam, self.model), cf, ok & near)
         T = params_to_pose(xf[b], cam, self.model)
         r, _ = residuals(T[None], rays, self.model)
@@ -330,28 +332,10 @@ class PoseFitter:
             rival_offset=rival_offset,
         )
 
-    def _choose(self, x: np.ndarray, c: np.ndarray, priors) -> tuple[int, np.ndarray, object]:
-        """The answer among polished rows: the best-cost one consistent with every prior (none
-        consistent: :class:`PriorContradicted`); also which rows may answer and the misses."""
-        if not priors:
-            return int(np.argmin(c)), np.isfinite(c), None
+    def _world(self, x: np.ndarray) -> np.ndarray:
+        """World poses (K, 4, 4) of parameter rows (priors are in the world frame)."""
         cam = self.stereo.left
-        T_world = cam.T_world_cam[None] @ params_to_pose(x, cam, self.model)
-        misses = prior_misses(priors, T_world, self.model)
-        ok = consistent(misses) & np.isfinite(c)
-        if not ok.any():
-            raise contradiction(priors, misses[np.isfinite(c)])
-        return int(np.argmin(np.where(ok, c, np.inf))), ok, misses
-
-    def _with_consistent(self, finals: list, x: np.ndarray, c: np.ndarray, priors) -> list:
-        """The polish's rows plus the best second-stage pose consistent with the priors when
-        none of them is (a worse-cost twin the usual choice of finals leaves out)."""
-        cam = self.stereo.left
-        T_world = cam.T_world_cam[None] @ params_to_pose(x, cam, self.model)
-        ok = consistent(prior_misses(priors, T_world, self.model)) & np.isfinite(c)
-        if ok.any() and not ok[finals].any():
-            finals = [*finals, int(np.argmin(np.where(ok, c, np.inf)))]
-        return finals
+        return cam.T_world_cam[None] @ params_to_pose(x, cam, self.model)
 
     def _diverse(self, x: np.ndarray, cost: np.ndarray, n: int) -> np.ndarray:
         """Indices of n low-cost rows, clearly different solutions first (> DISTINCT apart or
@@ -406,32 +390,3 @@ class PoseFitter:
             ],
             1,
         )
-
-
-def _subsample(pts: np.ndarray, n: int, rng: np.random.Generator) -> np.ndarray:
-    if len(pts) <= n:
-        return pts
-    return pts[np.sort(rng.choice(len(pts), n, replace=False))]
-
-
-def _balanced(nl: int, nr: int, n: int, rng: np.random.Generator) -> np.ndarray:
-    """Indices of up to n points from each eye (left first in the ray arrays)."""
-    a = np.sort(rng.choice(nl, min(n, nl), replace=False))
-    b = nl + np.sort(rng.choice(nr, min(n, nr), replace=False))
-    return np.concatenate([a, b])
-
-
-def mask_ends(view: MaskView, seed: int = 0) -> tuple[np.ndarray, np.ndarray]:
-    """The mask's two mutually farthest edge points (full-image px): the visible arc's ends."""
-    pts = edge_points(view)
-    if len(pts) < 2:
-        raise NeedleNotFound("the needle mask has no ends (fewer than two edge points)")
-    return _farthest_pair(pts, np.random.default_rng(seed))
-
-
-def _farthest_pair(pts: np.ndarray, rng: np.random.Generator) -> tuple[np.ndarray, np.ndarray]:
-    """The two mutually farthest edge points: the arc's ends (identity unknown)."""
-    p = _subsample(pts, 400, rng)
-    d = np.sum((p[:, None] - p[None]) ** 2, -1)
-    i, j = np.unravel_index(np.argmax(d), d.shape)
-    return p[i], p[j]
