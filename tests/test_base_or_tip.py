@@ -1,6 +1,8 @@
 """Base or tip: the swage band's colour decides, else the previous estimate; without either the
 answer is a refusal, and a fit slid along its circle away from the band is refused."""
 
+import dataclasses
+
 import numpy as np
 import pytest
 from perception_helpers import random_needle_pose, stereo
@@ -12,7 +14,7 @@ from suture_bt.perception.colour_refine import ColourRule
 from suture_bt.perception.needle_ends import swapped
 from suture_bt.perception.needle_projection import rasterize_needle
 from suture_bt.perception.pose_fit import MaskView, NeedleNotFound
-from suture_bt.transforms import invert
+from suture_bt.transforms import invert, make_transform
 
 
 class _Chooser:
@@ -45,27 +47,29 @@ def test_without_the_band_the_ends_follow_the_previous_estimate_or_are_refused()
         np.testing.assert_allclose(out, previous, atol=1e-9)
 
 
-def test_a_fit_slid_along_its_circle_away_from_the_band_is_refused():
-    """The swage band marks the first 3 mm of the arc: a pose whose base lies 8 mm before the
-    seen band (its arc moved along the same circle) is refused, the right pose kept."""
-    import dataclasses
-
-    from suture_bt.transforms import make_transform
-
-    st = stereo(960, 540)
-    loc = _Chooser(st)
-    T = random_needle_pose(np.random.default_rng(3), 0.08, 0.12)
-    band = dataclasses.replace(loc.model, tip_angle=loc.model.base_angle - 0.003 / loc.model.radius)
+def _banded(st, T, model):
+    """Images (pink, grey wire, violet first 3 mm) and full masks of a needle at T."""
+    band = dataclasses.replace(model, tip_angle=model.base_angle - 0.003 / model.radius)
     images, views = [], []
     for cam in (st.left, st.right):
         Tc = invert(cam.T_world_cam) @ st.left.T_world_cam @ T
-        mask = rasterize_needle(cam, Tc, loc.model)
+        mask = rasterize_needle(cam, Tc, model)
         img = np.empty((540, 960, 3), np.uint8)
         img[:] = (215, 140, 132)
         img[mask] = (158, 161, 168)
         img[rasterize_needle(cam, Tc, band)] = (150, 60, 170)
         images.append(img)
         views.append(MaskView(mask))
+    return images, views
+
+
+def test_a_fit_slid_along_its_circle_away_from_the_band_is_refused():
+    """The swage band marks the first 3 mm of the arc: a pose whose base lies 8 mm before the
+    seen band (its arc moved along the same circle) is refused, the right pose kept."""
+    st = stereo(960, 540)
+    loc = _Chooser(st)
+    T = random_needle_pose(np.random.default_rng(3), 0.08, 0.12)
+    images, views = _banded(st, T, loc.model)
     out, _, decided_by = loc.base_tip.orient(T, images, views, 3.0, None)
     assert decided_by == "colour"
     np.testing.assert_allclose(out, T, atol=1e-9)
@@ -73,6 +77,23 @@ def test_a_fit_slid_along_its_circle_away_from_the_band_is_refused():
     turn = np.array([[np.cos(a), -np.sin(a), 0.0], [np.sin(a), np.cos(a), 0.0], [0.0, 0.0, 1.0]])
     with pytest.raises(NeedleNotFound, match="slid along the needle's circle"):
         loc.base_tip.orient(T @ make_transform(turn), images, views, 3.0, None)
+
+
+def test_a_fit_that_swings_its_base_off_the_seen_band_is_refused():
+    """A pose turned about its tip (the seen tip piece kept, the hidden rest misplaced) puts
+    its base beside the violet band, not through it: refused, naming the miss."""
+    st = stereo(960, 540)
+    loc = _Chooser(st)
+    T = random_needle_pose(np.random.default_rng(3), 0.08, 0.12)
+    images, views = _banded(st, T, loc.model)
+    half_width = loc.model.wire_radius * st.left.fx / T[2, 3]
+    loc.base_tip.orient(T, images, views, half_width, None)  # the right pose passes
+    tip = T[:3, :3] @ loc.model.tip + T[:3, 3]
+    a = np.deg2rad(12.0)
+    R = np.array([[1.0, 0, 0], [0, np.cos(a), -np.sin(a)], [0, np.sin(a), np.cos(a)]])
+    swung = make_transform(R @ T[:3, :3], R @ (T[:3, 3] - tip) + tip)
+    with pytest.raises(NeedleNotFound, match="swage band lies .* off the fitted arc"):
+        loc.base_tip.orient(swung, images, views, half_width, None)
 
 
 def test_an_end_counts_as_seen_only_on_or_next_to_the_mask():

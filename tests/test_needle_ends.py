@@ -9,6 +9,7 @@ from suture_bt.geometry import NeedleModel
 from suture_bt.perception.needle_ends import (
     BAND_LENGTH,
     MIN_EVIDENCE,
+    band_miss_px,
     band_offset,
     base_evidence,
     swap_rotation,
@@ -114,6 +115,28 @@ def test_band_offset_is_inside_the_band_for_the_right_pose_and_grows_as_the_fit_
     # No band seen, no offset.
     grey = _scene(T, band_colour=GREY)
     assert band_offset(*grey, T, MODEL) is None
+
+
+def _swung(T: np.ndarray, deg: float) -> np.ndarray:
+    """The pose turned by ``deg`` about the camera's x axis through its tip: the tip stays, the
+    base swings away (a fit that explains a seen tip piece and misplaces the hidden rest)."""
+    tip = T[:3, :3] @ MODEL.tip + T[:3, 3]
+    a = np.deg2rad(deg)
+    R = np.array([[1.0, 0, 0], [0, np.cos(a), -np.sin(a)], [0, np.sin(a), np.cos(a)]])
+    return make_transform(R @ T[:3, :3], R @ (T[:3, 3] - tip) + tip)
+
+
+def test_band_miss_is_inside_the_wire_for_the_right_pose_and_grows_as_the_fit_swings():
+    T = _pose()
+    images, _, cams = _scene(T)
+    half_width = MODEL.wire_radius * cams[0].fx / T[2, 3]
+    reach = 30.0
+    assert band_miss_px(images, cams, T, MODEL, reach) < 0.6 * half_width
+    swung = band_miss_px(images, cams, _swung(T, 15.0), MODEL, reach)
+    assert swung > 3.0 * half_width
+    # Beyond the reach the band is not looked at; no band seen, no miss.
+    assert band_miss_px(images, cams, _swung(T, 15.0), MODEL, 1.0) is None
+    assert band_miss_px(_scene(T, band_colour=GREY)[0], cams, T, MODEL, reach) is None
 
 
 def _base_pixel(cam, T_left_needle: np.ndarray, cams) -> np.ndarray:

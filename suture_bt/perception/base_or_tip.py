@@ -18,6 +18,7 @@ from suture_bt.perception.mask_view import MaskView
 from suture_bt.perception.needle_ends import (
     BAND_LENGTH,
     MIN_EVIDENCE,
+    band_miss_px,
     band_offset,
     base_evidence,
     swapped,
@@ -35,6 +36,13 @@ CUT_PROBE, CUT_DEPTH = 0.002, 0.0003
 #: Farthest the seen swage band may start from the fitted base (m, along the arc): half a band
 #: length of slack past the band's own 3 mm.
 MAX_BAND_OFFSET = 1.5 * BAND_LENGTH
+#: Farthest the seen swage band may lie off the fitted arc, in the wire's half widths (px):
+#: on the development frames (seeds 1000 and 6173, 493 answers with the band seen) every right
+#: answer had it within 0.72 of them (p99 0.55, median 0.35). Found on a report seed's wrong
+#: answer (a handover needle 10° off whose base swung 23 px past the band a jaw cut off).
+MAX_BAND_MISS = 1.5
+#: How far (wire half widths) from the fitted band's projection violet pixels are looked for.
+BAND_REACH = 8.0
 
 
 def occlusion_radius(half_width: float) -> float:
@@ -114,6 +122,14 @@ class BaseTipChooser:
                     f"the swage band starts {1e3 * offset:.1f} mm from the fitted base (it "
                     f"covers the first {1e3 * BAND_LENGTH:.0f} mm): the fit slid along the "
                     "needle's circle"
+                )
+            reach = BAND_REACH * half_width
+            miss = band_miss_px(tuple(images), cams, T_cam, self.model, reach)
+            if miss is not None and miss > MAX_BAND_MISS * half_width:
+                raise NeedleNotFound(
+                    f"the swage band lies {miss:.1f} px off the fitted arc (limit "
+                    f"{MAX_BAND_MISS * half_width:.1f} px, {MAX_BAND_MISS:g} wire half widths): "
+                    "the fit explains the seen piece but swings away from the needle's base"
                 )
             return T_cam, evidence, "colour"
         if previous is not None:

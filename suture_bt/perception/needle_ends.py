@@ -257,6 +257,60 @@ def band_offset(
     return max(offsets) if offsets else None
 
 
+#: Blue above green (8-bit levels) of a band pixel looked for outside the needle mask: the
+#: violet score alone also passes the dark red of the cavity and shadowed tissue (blue about
+#: level with green there, about +110 on the band).
+BAND_MIN_BLUE_MINUS_GREEN = 40
+
+
+def band_miss_px(
+    images: tuple[np.ndarray, np.ndarray],
+    cams: tuple[CameraModel, CameraModel],
+    T_cam_needle: np.ndarray,
+    model: NeedleModel,
+    reach_px: float,
+    samples: int = 400,
+) -> float | None:
+    """How far (px) the swage band seen near the fitted base lies off the fitted arc: the
+    median distance of the violet pixels within ``reach_px`` of the fitted band's projection
+    (the arc's first BAND_LENGTH) to the whole arc's projection, the larger over the eyes that
+    see at least MIN_BAND_PIXELS of them; None when neither does.
+
+    The pixels are looked for in the image, not the needle mask (violet and clearly bluer
+    than green): a band cut off from the seen piece by an occluder is left out of the mask,
+    yet it still shows where the base is.
+    A right pose runs through it (its pixels lie within the wire's half width of the
+    centre-line); a pose whose seen piece fits while its hidden part swings elsewhere leaves
+    the band beside its arc."""
+    angles = np.linspace(model.base_angle, model.tip_angle, samples)
+    arc = model.point_at(angles)
+    in_band = np.abs(angles - model.base_angle) * model.radius <= BAND_LENGTH
+    misses = []
+    for rgb, cam in zip(images, cams, strict=True):
+        pts = transform_points(_in_eye(cam, cams[0], T_cam_needle), arc)
+        if np.any(pts[:, 2] <= 0):
+            continue
+        uv = project_cam(cam, pts)
+        lo = np.floor(uv[in_band].min(0) - reach_px).astype(int)
+        hi = np.ceil(uv[in_band].max(0) + reach_px).astype(int) + 1
+        lo, hi = np.maximum(lo, 0), np.minimum(hi, (rgb.shape[1], rgb.shape[0]))
+        if np.any(hi <= lo):
+            continue
+        crop = rgb[lo[1] : hi[1], lo[0] : hi[0]]
+        blue_over_green = crop[..., 2].astype(np.int16) - crop[..., 1]
+        ys, xs = np.nonzero(
+            (violet_score(crop) > BAND_PIXEL_SCORE) & (blue_over_green >= BAND_MIN_BLUE_MINUS_GREEN)
+        )
+        p = np.stack([xs + lo[0], ys + lo[1]], 1).astype(float)
+        to_band = np.sqrt(((p[:, None] - uv[in_band][None]) ** 2).sum(-1).min(1))
+        p = p[to_band <= reach_px]
+        if len(p) < MIN_BAND_PIXELS:
+            continue
+        d = np.sqrt(((p[:, None] - uv[None]) ** 2).sum(-1).min(1))
+        misses.append(float(np.median(d)))
+    return max(misses) if misses else None
+
+
 def base_evidence(
     images: tuple[np.ndarray, np.ndarray],
     views: tuple[MaskView, MaskView],
