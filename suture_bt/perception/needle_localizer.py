@@ -6,14 +6,15 @@
    :mod:`colour_refine`).
 3. The stereo pose fit (:mod:`fit_attempts`, :mod:`pose_fit`) starts from the left keypoints,
    with a depth hint from their stereo disparity, and optionally a warm start from the
-   previous estimate.
+   previous estimate; an answer with a clearly different pose of near-equal cost nearby
+   (:mod:`rival_probe`) is refused.
 4. The fitted arc's unseen part must be hidden by something (:mod:`exposure_gate`,
    :mod:`unseen_arc`: a jaw or shaft, the border, the tissue where the caller's tissue model
    says it can hide it), and no wire both eyes see may lie deep inside the known tissue; else
    a refusal.
 5. The outline cannot tell base from tip: the colour at the fitted ends (the violet swage band
    at the base, :mod:`needle_ends`; :mod:`base_or_tip`) does, else continuity with the previous
-   estimate or the holder's jaws.
+   estimate or the holder's jaws; a fit whose arc passes beside the seen band is refused.
 Only images and the calibrated camera model are used (no ground truth).
 """
 
