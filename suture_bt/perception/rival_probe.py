@@ -23,6 +23,7 @@ import numpy as np
 from scipy.spatial.transform import Rotation
 
 from suture_bt.geometry import NeedleModel
+from suture_bt.interfaces import StereoCameraModel
 from suture_bt.perception.edge_residuals import EdgeRays
 from suture_bt.perception.fit_solver import levenberg_marquardt
 from suture_bt.perception.needle_projection import params_to_pose, pose_to_params
@@ -82,10 +83,11 @@ class FitRays:
 
 @dataclass(frozen=True)
 class RivalProbe:
-    """Descends from turns of an answer (see the module docstring) with a fitter's solver
-    settings; ``n_polish`` clearly different results are polished on every edge point."""
+    """Descends from turns of an answer (see the module docstring) with the fit's solver,
+    ``iterations`` per stage; ``n_polish`` clearly different results are polished on every
+    edge point."""
 
-    stereo: object
+    stereo: StereoCameraModel
     model: NeedleModel
     iterations: tuple[int, int, int] = (6, 6, 6)
     #: Probes carried from the coarse edge subset to the mid one (the cheapest clearly
