@@ -305,8 +305,9 @@ class PoseFitter:
             xf = np.concatenate([xf, xp])
             cf = np.concatenate([cf, np.where(self._in_range(xp), cp, np.inf)])
             b, ok, misses = choose_answer(self._world(xf), cf, priors, self.model)
-        rival_ratio, rival_offset = rival(b, params_to_pose(xf, cam, self.model), cf, ok & near)
-        T = params_to_pose(xf[b], cam, self.model)
+        poses = params_to_pose(xf, cam, self.model)
+        rival_ratio, rival_offset = rival(b, poses, cf, ok & near)
+        T = poses[b]
         r, _ = residuals(T[None], rays, self.model)
         r = r[0]
         inl = np.abs(r) < 1.5
@@ -323,7 +324,7 @@ class PoseFitter:
             inlier_fraction=float(inl.mean()),
             n_edge_points=(len(el), len(er)),
             ambiguity=amb,
-            candidates=[params_to_pose(xx, cam, self.model) for xx in xf],
+            candidates=list(poses),
             candidate_costs=tuple(float(v) for v in cf),
             angle_std_deg=ang_std,
             position_std_mm=pos_std,

@@ -48,6 +48,7 @@ class PriorTerm:
         self.points = np.ascontiguousarray(np.array(pts, dtype=np.float64).reshape(-1, 3))
         self.tolerance = np.array(tol)
         self.model = model
+        self._ends = np.stack([model.tip, model.base]).astype(np.float64)
 
     def __bool__(self) -> bool:
         return len(self.points) > 0
@@ -56,9 +57,8 @@ class PriorTerm:
         """Offsets (K, P, 3) over each prior's tolerance (:func:`needle_prior.arc_offsets`,
         compiled: the fit calls this on small batches many times)."""
         m = self.model
-        ends = np.stack([m.tip, m.base]).astype(np.float64)
         T = np.ascontiguousarray(T, dtype=np.float64)
-        off = _arc_offsets(T, self.points, m.radius, m.tip_angle, m.base_angle, ends)
+        off = _arc_offsets(T, self.points, m.radius, m.tip_angle, m.base_angle, self._ends)
         return off / self.tolerance[None, :, None]
 
     def __call__(self, T: np.ndarray) -> np.ndarray:
