@@ -39,6 +39,8 @@ def test_a_clean_outline_is_answered_and_each_gate_refuses_with_its_reason():
         _attempts(st, max_rms_px=0.0)(*args)
     with pytest.raises(NeedleNotFound, match="leaves the pose loose"):
         _attempts(st, max_angle_std_deg=0.0)(*args)
+    with pytest.raises(NeedleNotFound, match="leaves the needle's position loose"):
+        _attempts(st, max_position_std_mm=0.0)(*args)
 
 
 def test_an_answer_with_a_close_rival_is_refused_with_its_reason():

@@ -1,22 +1,30 @@
 """The rival probe: its starts turn the answer as documented, ``distinct`` draws the
 benchmark's line, ``rival`` picks the cheapest usable clearly different pose, and in a fit a
-clean outline leaves no close rival."""
+clean outline leaves no close rival. The slide probe's starts slide the answer along its own
+circle, and from a pose slid off the needle it finds the needle."""
 
 import numpy as np
 from perception_helpers import pose_errors
 from scipy.spatial.transform import Rotation
 from test_pose_fit import MODEL, _scene_1080p, _tip_hidden
 
+from suture_bt.perception.edge_residuals import edge_rays
+from suture_bt.perception.mask_view import edge_points
+from suture_bt.perception.needle_projection import params_to_pose, pose_to_params
 from suture_bt.perception.pose_fit import PoseFitter
 from suture_bt.perception.rival_probe import (
     DISTINCT_DEG,
     DISTINCT_MM,
     MAX_RIVAL_RATIO,
     PROBE_ANGLES_DEG,
+    SLIDE_ANGLES_DEG,
+    FitRays,
+    RivalProbe,
     distinct,
     pose_offset,
     probe_starts,
     rival,
+    slide_starts,
 )
 
 
@@ -86,3 +94,32 @@ def test_a_needle_half_hidden_has_a_turned_rival_and_the_fit_says_so():
     assert mm > DISTINCT_MM or deg > DISTINCT_DEG
     free = PoseFitter(st, MODEL, probe_rivals=False).fit(*occ, short)
     assert free.rival_ratio == float("inf") and free.rival_offset is None
+
+
+def _slid(T: np.ndarray, deg: float) -> np.ndarray:
+    S = T.copy()
+    S[:3, :3] = Rotation.from_rotvec(np.deg2rad(deg) * T[:3, 2]).as_matrix() @ T[:3, :3]
+    return S
+
+
+def test_slide_starts_keep_the_circle_and_move_along_it():
+    T = _pose((10.0, -20.0, 30.0))
+    starts = slide_starts(T, MODEL)
+    assert len(starts) == len(SLIDE_ANGLES_DEG)
+    assert np.allclose(starts[:, :3, 3], T[:3, 3])  # the same centre
+    assert np.allclose(starts[:, :3, 2], T[:3, 2])  # the same plane
+    for S, a in zip(starts, SLIDE_ANGLES_DEG, strict=True):
+        assert np.isclose(pose_offset(T, S)[1], abs(a))
+        assert np.allclose(S, _slid(T, a))
+
+
+def test_from_a_pose_slid_along_its_circle_the_slide_probe_finds_the_needle():
+    st, T, left, right, _ = _scene_1080p(5, 0.0)
+    rays = edge_rays(st, edge_points(left), edge_points(right))
+    off = _slid(T, 10.0)
+    x_off = pose_to_params(off[None], st.left, MODEL)[0]
+    probe = RivalProbe(st, MODEL, n_mid=2, n_polish=1, starts=slide_starts)
+    x, cost = probe(x_off, FitRays(rays, rays, rays), [], "geman_mcclure")
+    assert len(x) == 1 and np.isfinite(cost[0])
+    pos, ang = pose_errors(params_to_pose(x, st.left, MODEL)[0], T)
+    assert pos < 0.3 and ang < 1.0

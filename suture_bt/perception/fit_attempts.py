@@ -40,6 +40,14 @@ MAX_RMS_PX = 0.45
 #: least 79 % on the re-drawn 1080p occluded sets), those below 60 % were a mask of another
 #: object (one was 117 mm off), and the 64-68 % ones there wrong (one 160 deg off).
 MIN_INLIER_FRACTION = 0.7
+#: A final fit whose predicted arc-centre spread (mm) exceeds this is refused: a third of the
+#: 2 mm an answer may be off and still count as right. A far needle's depth rests on its
+#: apparent size (DESIGN.md §5); over the 2021 answers of the session 12-14 report runs the
+#: spread exceeded 0.6 mm three times: a free needle 182 mm away answered 2.07 mm off (0.68),
+#: a mirror twin 15 mm off (0.66) and one right answer (1.32). On the development frames
+#: (seeds 1000 and 6173, 511 right answers) it refuses 4 right ones, 100-190 mm away, two of
+#: them 1.1-1.3 mm off; no wrong answer there exceeded 0.6.
+MAX_POSITION_STD_MM = 0.6
 
 
 def _same_pair(a, b, tol_px: float = 3.0) -> bool:
@@ -56,7 +64,8 @@ def _same_pair(a, b, tol_px: float = 3.0) -> bool:
 class FitAttempts:
     """The fit stage (see the module docstring) with the localiser's cameras, model, colour
     rule and fitter; answers worse than ``max_rms_px`` RMS, explaining less than
-    MIN_INLIER_FRACTION of the edge, looser than ``max_angle_std_deg`` or with a clearly
+    MIN_INLIER_FRACTION of the edge, looser than ``max_angle_std_deg`` or
+    ``max_position_std_mm`` or with a clearly
     different pose within ``max_rival_ratio`` of their cost (:mod:`rival_probe`) are refused."""
 
     stereo: StereoCameraModel
@@ -66,6 +75,7 @@ class FitAttempts:
     max_rms_px: float = MAX_RMS_PX
     max_angle_std_deg: float = 2.0
     max_rival_ratio: float = MAX_RIVAL_RATIO
+    max_position_std_mm: float = MAX_POSITION_STD_MM
 
     def __call__(
         self, images, views, ends, depth, half_width, previous, kp, score, priors=()
@@ -165,6 +175,12 @@ class FitAttempts:
                 f"the seen part leaves the pose loose: predicted angle spread "
                 f"{fit.angle_std_deg:.1f} deg (> {limit:.1f}; position "
                 f"{fit.position_std_mm:.1f} mm): too little of the needle's curve is seen"
+            )
+        if fit.position_std_mm > self.max_position_std_mm:
+            raise NeedleNotFound(
+                f"the seen outline leaves the needle's position loose: predicted spread "
+                f"{fit.position_std_mm:.2f} mm (> {self.max_position_std_mm:.2f}; angle "
+                f"{fit.angle_std_deg:.1f} deg): too far or too little seen to place it"
             )
         if fit.rival_offset is not None and fit.rival_ratio <= self.max_rival_ratio:
             mm, deg = fit.rival_offset

@@ -63,7 +63,7 @@ from suture_bt.perception.needle_projection import (
 )
 from suture_bt.perception.prior_term import PriorTerm
 from suture_bt.perception.refusal import NeedleNotFound
-from suture_bt.perception.rival_probe import FitRays, RivalProbe, rival
+from suture_bt.perception.rival_probe import FitRays, RivalProbe, rival, slide_starts
 
 #: A clearly different second-stage pose costing at most this much more than the best also
 #: seeds the second search (1.3 gave the same answers on the benchmarks for 10 ms more).
@@ -153,6 +153,9 @@ class PoseFitter:
     #: Whether the answer is probed for clearly different poses of near-equal cost
     #: (:mod:`rival_probe`; a cheaper one becomes the answer).
     probe_rivals: bool = True
+    #: Whether an answer with a hidden end (or given priors) is slid along its own circle in
+    #: search of a cheaper pose (:mod:`rival_probe`, where its development figures are).
+    probe_slides: bool = True
 
     def fit(
         self,
@@ -293,13 +296,20 @@ class PoseFitter:
             raise NeedleNotFound("pose fit diverged")
         b, ok, misses = choose_answer(self._world(xf), cf, priors, self.model)
         amb = float(np.min(np.delete(cf, b)) - cf[b]) if len(cf) > 1 else float("inf")
+        fit_rays = FitRays(rays, coarse, mid)
+        if self.probe_slides and hidden_end:
+            slide = RivalProbe(self.stereo, self.model, n_mid=2, n_polish=1, starts=slide_starts)
+            xs, cs = slide(xf[b], fit_rays, polish, self.final_loss)
+            keep = cs < cf[b]
+            xf, cf = np.concatenate([xf, xs[keep]]), np.concatenate([cf, cs[keep]])
+            b, ok, misses = choose_answer(self._world(xf), cf, priors, self.model)
         # Rivals are the probe's poses (and the first answer, if one of them replaces it):
         # the other finals are separate basins, mostly the mirror twin, whose small cost gap
         # decides reliably on a whole outline (its own refusals: the priors, the spread).
         near = np.zeros(len(xf), bool)
         if self.probe_rivals:
             probe = RivalProbe(self.stereo, self.model)
-            xp, cp = probe(xf[b], FitRays(rays, coarse, mid), polish, self.final_loss)
+            xp, cp = probe(xf[b], fit_rays, polish, self.final_loss)
             near = np.concatenate([near, np.ones(len(xp), bool)])
             near[b] = True
             xf = np.concatenate([xf, xp])
