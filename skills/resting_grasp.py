@@ -10,6 +10,12 @@ reaches). The blades then open along the needle's radius, one of them below the 
 grasp point must stand clear of the tissue: the arc angle nearest the asked one whose jaw region
 keeps ``SIDE_CLEARANCE`` (wire) and ``BLADE_CLEARANCE`` (blades, along the whole approach)
 above the phantom's known surface (:mod:`~suture_bt.geometry.tissue_surface`).
+
+When the straight-down grasp of a flat needle is out of a wrist's reach, the same hand with its
+jaws turned about the wire (``APPROACH_TILTS``) is offered next: the jaws still close across
+the wire, coming in at a slant. A held-out campaign trial (seed 6580945831, the phantom moved
+and turned) failed because a laid-down needle's straight grasp needed a wrist yaw of 90° from
+PSM2 and 85.4° from PSM1, the limit 85°.
 """
 
 from __future__ import annotations
@@ -22,7 +28,7 @@ from suture_bt.geometry import NeedleModel
 from suture_bt.geometry.tissue_surface import height_above_tissue
 from suture_bt.skills.base import SkillFailure
 from suture_bt.skills.grasps import END_MARGIN, GRASP_DEPTH, backed_off, hand, tip_goal
-from suture_bt.transforms import make_transform
+from suture_bt.transforms import invert, make_transform
 
 #: Largest angle (rad) between the jaws' direction and straight down (−phantom up) for a grasp
 #: from above; a needle tilted more stands on its edge and is taken from the side.
@@ -36,6 +42,11 @@ APPROACH, LIFT = 0.010, 0.015
 #: A side grasp: the wire point stays this high above the tissue surface, and the blades (half
 #: ``BLADE_HALF_SPREAD`` either side of the wire, from the hover to the grasp) this high (m).
 SIDE_CLEARANCE, BLADE_CLEARANCE, BLADE_HALF_SPREAD = 0.002, 0.0005, 0.0012
+#: Turns (rad) of a flat needle's grasp about the wire, tried in this order after the
+#: straight-down one, and how much deeper (m) a turned grasp's blades may reach below the
+#: tissue top than the straight one's (a blade swings down as the jaws turn).
+APPROACH_TILTS = tuple(np.deg2rad(d) for d in (15.0, -15.0, 30.0, -30.0))
+TILT_EXTRA_DEPTH = 0.0005
 #: A pose lies flat on the tissue: plane tilt (rad) and centre-line height range (m).
 FLAT_TILT, ON_SURFACE = np.deg2rad(15.0), (-0.0003, 0.0012)
 
@@ -58,6 +69,16 @@ def turned_over_hand(needle: NeedleModel, arc_angle: float) -> np.ndarray:
     radial = np.array([np.cos(a), np.sin(a), 0.0])
     R = np.stack([-tangent, -radial, [0.0, 0.0, 1.0]])  # rows: tip axes in the needle frame
     return make_transform(R, np.array([0.0, 0.0, -GRASP_DEPTH]) - R @ needle.point_at(a))
+
+
+def tilted_about_wire(T_tip_needle: np.ndarray, tilt: float) -> np.ndarray:
+    """The same hand with the jaws turned by ``tilt`` (rad) about the wire: about tip x
+    through the held wire point, ``GRASP_DEPTH`` behind the tip."""
+    c, s = np.cos(tilt), np.sin(tilt)
+    turn = make_transform(np.array([[1.0, 0.0, 0.0], [0.0, c, -s], [0.0, s, c]]), np.zeros(3))
+    to_wire = make_transform(np.eye(3), np.array([0.0, 0.0, -GRASP_DEPTH]))
+    new_tip_in_old = to_wire @ turn @ invert(to_wire)
+    return invert(new_tip_in_old) @ T_tip_needle
 
 
 def resting_tilt(ctx, T_world_needle: np.ndarray) -> tuple[float, bool]:
@@ -92,9 +113,9 @@ def resting_grasps(ctx, T_world_needle: np.ndarray, arc_angle: float) -> list[Re
     tilt, z_up = resting_tilt(ctx, T_world_needle)
     a = float(arc_angle)
     if tilt <= MAX_TILT:
-        if z_up:
-            return [RestingGrasp(hand(ctx.needle, a), "driving", a)]
-        return [RestingGrasp(turned_over_hand(ctx.needle, a), "turned over", a)]
+        name, make = ("driving", hand) if z_up else ("turned over", turned_over_hand)
+        straight = make(ctx.needle, a)
+        return [RestingGrasp(straight, name, a)] + _tilted(ctx, T_world_needle, straight, name, a)
     found, reasons = [], []
     for name, make in (("driving", hand), ("turned over", turned_over_hand)):
         angle, why = _side_angle(ctx, T_world_needle, make, a)
@@ -108,6 +129,18 @@ def resting_grasps(ctx, T_world_needle: np.ndarray, arc_angle: float) -> list[Re
             f"side grasp clear of the tissue ({'; '.join(reasons)})"
         )
     return found
+
+
+def _tilted(ctx, T_world_needle, straight, name: str, a: float) -> list[RestingGrasp]:
+    """The straight grasp turned about the wire by each of APPROACH_TILTS whose blades reach
+    no more than TILT_EXTRA_DEPTH deeper below the tissue than the straight grasp's."""
+    floor = jaw_heights(ctx, T_world_needle, straight)[1] - TILT_EXTRA_DEPTH
+    out = []
+    for tilt in APPROACH_TILTS:
+        T = tilted_about_wire(straight, tilt)
+        if jaw_heights(ctx, T_world_needle, T)[1] >= floor:
+            out.append(RestingGrasp(T, f"{name}, jaws turned {np.rad2deg(tilt):+.0f}°", a))
+    return out
 
 
 def _side_angle(ctx, T_world_needle: np.ndarray, make, asked: float):

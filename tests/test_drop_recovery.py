@@ -129,6 +129,10 @@ def test_needle_dropped_out_of_both_arms_reach_fails_the_throw_saying_so(session
     assert session.run_until(running(session, CHECK_1, "bringing the needle")) is not None
     session.world.faults.drop("psm2")
     session.world.needle.set_pose(pose(rot_z(0.3), OUT_OF_REACH))  # test API: off the phantom
+    # About 250 mm from the cameras, beyond the localiser's working range: its predicted
+    # position spread (about 0.7 mm) is refused by the 0.6 mm gate ("not found"). Loosened
+    # here, so that the needle is localised and the out-of-reach path is what is tested.
+    session.context.sensor.localizer.max_position_std_mm = float("inf")
     t_drop = session.context.clock.now()
     throw = finish(session)
     assert throw["status"] == "FAILURE"
@@ -225,8 +229,10 @@ def test_a_needle_turned_over_is_taken_from_above_and_one_on_its_edge_from_the_s
 
     ctx = SimpleNamespace(phantom=PhantomModel(), needle=NeedleModel())
     flat = pose(np.eye(4), ON_TISSUE)
-    assert [len(p) for p in pick_up_paths(ctx, flat, 2.8)] == [3]
-    [(hover, grasp, lift)] = pick_up_paths(ctx, flat @ rot_x(np.pi), 2.8)  # turned over
+    # straight down first, then the same hand with its jaws turned about the wire
+    paths = pick_up_paths(ctx, flat, 2.8)
+    assert len(paths) > 1 and all(len(p) == 3 for p in paths)
+    [(hover, grasp, lift), *_] = pick_up_paths(ctx, flat @ rot_x(np.pi), 2.8)  # turned over
     down = -PhantomModel().T_world_phantom[:3, 2]
     assert grasp[:3, 2] @ down > np.cos(np.deg2rad(1.0))  # jaws straight down, as for flat
     assert np.linalg.norm(grasp[:3, 3] - hover[:3, 3]) > 0.005

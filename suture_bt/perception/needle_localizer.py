@@ -34,6 +34,7 @@ from suture_bt.perception.base_or_tip import BaseTipChooser
 from suture_bt.perception.colour_refine import ColourRule
 from suture_bt.perception.exposure_gate import MAX_EXPOSED, ExposureGate
 from suture_bt.perception.fit_attempts import (  # noqa: F401 - gates, re-exported
+    MAX_POSITION_STD_MM,
     MAX_RIVAL_RATIO,
     MAX_RMS_PX,
     MIN_INLIER_FRACTION,
@@ -145,6 +146,8 @@ class NeedleLocalizer:
         self.max_angle_std_deg_held = max_angle_std_deg_held
         #: A clearly different pose within this ratio of the answer's cost refuses it.
         self.max_rival_ratio = MAX_RIVAL_RATIO
+        #: An answer whose predicted arc-centre spread exceeds this (mm) is refused.
+        self.max_position_std_mm = MAX_POSITION_STD_MM
         self.tissue = tissue
         self.max_exposed = max_exposed
         self.fitter = PoseFitter(stereo, self.model, depth_range=(MIN_DEPTH, MAX_DEPTH))
@@ -336,6 +339,7 @@ class NeedleLocalizer:
             self.max_rms_px,
             self._angle_std_limit(priors),
             self.max_rival_ratio,
+            self.max_position_std_mm,
         )
         return attempts(images, views, ends, depth, half_width, previous, kp, score, priors)
 
