@@ -45,7 +45,7 @@ MIN_INLIER_FRACTION = 0.7
 #: apparent size (DESIGN.md §5); over the 2021 answers of the session 12-14 report runs the
 #: spread exceeded 0.6 mm three times: a free needle 182 mm away answered 2.07 mm off (0.68),
 #: a mirror twin 15 mm off (0.66) and one right answer (1.32). On the development frames
-#: (seeds 1000 and 6173, 511 right answers) it refuses 4 right ones, 100-190 mm away, two of
+#: (seeds 1000 and 6173, 511 right answers) it refuses 4 right ones, 100-182 mm away, two of
 #: them 1.1-1.3 mm off; no wrong answer there exceeded 0.6.
 MAX_POSITION_STD_MM = 0.6
 
@@ -65,8 +65,8 @@ class FitAttempts:
     """The fit stage (see the module docstring) with the localiser's cameras, model, colour
     rule and fitter; answers worse than ``max_rms_px`` RMS, explaining less than
     MIN_INLIER_FRACTION of the edge, looser than ``max_angle_std_deg`` or
-    ``max_position_std_mm`` or with a clearly
-    different pose within ``max_rival_ratio`` of their cost (:mod:`rival_probe`) are refused."""
+    ``max_position_std_mm``, or with a clearly different pose within ``max_rival_ratio`` of
+    their cost (:mod:`rival_probe`) are refused."""
 
     stereo: StereoCameraModel
     model: NeedleModel

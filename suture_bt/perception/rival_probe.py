@@ -16,15 +16,16 @@ ambiguous, which the localiser refuses (see :mod:`fit_attempts`).
 
 A second, smaller probe slides the answer along its own circle (turns about the needle's own
 z axis through the arc centre, :func:`slide_starts`): a fit can stop a few degrees along the
-circle from the needle, where its ends are seen only in part (dev: 6.7° off at the Task 3
-start, its cost 3.6× the needle's). It runs when an end may be hidden (or priors are given),
-and only a cheaper slid pose is kept, replacing the answer. A slid pose is never a rival:
-where both ends are hidden (a needle pulled through, its tip in the jaw and its base in the
-tissue) the outline cannot say how far along its circle the needle is, and counting slides as
-rivals refused 10 right development answers, 8 of them ``in_port`` views. On the development frames
-(seeds 1000 and 6173, 651 calls with and without priors) right / wrong / refused went from
-508 / 3 / 140 to 511 / 3 / 137; sliding whole outlines too turned an edge-on free needle's
-refusal into a wrong answer (a cheaper basin the slide reached, the needle not in it).
+circle from the needle where its ends are seen only in part (found on session 14's report seed
+78212405: a Task 3 start answered 6.7° off, at 3.6× the cost of the needle's own pose). It
+runs when an end may be hidden (or priors are given), and only a cheaper slid pose is kept,
+replacing the answer. A slid pose is never a rival: where both ends are hidden (a needle
+pulled through, its tip in the jaw and its base in the tissue) the outline cannot say how far
+along its circle the needle is, and counting slides as rivals refused 10 right development
+answers, 8 of them ``in_port`` views. On the development frames (seeds 1000 and 6173, 651
+calls with and without priors) right / wrong / refused went from 508 / 3 / 140 to
+511 / 3 / 137; sliding whole outlines too turned an edge-on free needle's refusal into a wrong
+answer (a cheaper basin the slide reached, the needle not in it).
 """
 
 from __future__ import annotations
