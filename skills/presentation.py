@@ -43,11 +43,6 @@ from suture_bt.transforms import make_transform
 DEPTH = 0.062
 #: Distances tried (m), the preferred one first.
 DEPTHS = (DEPTH, 0.056, 0.068)
-#: Nearer distances (m), tried only after every point at DEPTHS: nearer the cameras the pinch
-#: point stands higher above the tissue. A held-out campaign trial (seed 8629029330: the
-#: phantom 3.6 mm higher and turned) had every point at DEPTHS too low over the tissue for an
-#: uncalibrated PSM2, and no presentation pose at all.
-NEAR_DEPTHS = (0.050, 0.044)
 #: Image-plane offsets of the pinch point (camera frame, m): x toward the arm's own side
 #: (s = +1), y up the image when negative.
 X_OFFSETS = (0.0, 0.008, -0.008, 0.016, -0.016, 0.024, 0.032, 0.040, 0.048)
@@ -122,15 +117,11 @@ def _side(ctx: TaskContext, arm: ArmHandle) -> float:
 
 def presentation_points(ctx: TaskContext, side: float = 1.0) -> list[np.ndarray]:
     """World points for the pinch point, in order of preference: nearest the image centre and
-    ``DEPTH`` first, the arm's own side before the other at equal distance; then the same at
-    ``NEAR_DEPTHS``."""
+    ``DEPTH`` first, the arm's own side before the other at equal distance."""
     cam = ctx.camera.model.left.T_world_cam
-    out = []
-    for depths in (DEPTHS, NEAR_DEPTHS):  # the near ones only after all the others
-        grid = [(d, x, y) for d in depths for x in X_OFFSETS for y in Y_OFFSETS]
-        grid.sort(key=lambda g: (np.hypot(g[1], g[2]) + 2.0 * abs(g[0] - DEPTH), -g[1]))
-        out += [(cam @ np.array([side * x, y, d, 1.0]))[:3] for d, x, y in grid]
-    return out
+    grid = [(d, x, y) for d in DEPTHS for x in X_OFFSETS for y in Y_OFFSETS]
+    grid.sort(key=lambda g: (np.hypot(g[1], g[2]) + 2.0 * abs(g[0] - DEPTH), -g[1]))
+    return [(cam @ np.array([side * x, y, d, 1.0]))[:3] for d, x, y in grid]
 
 
 def presentation_point(ctx: TaskContext) -> np.ndarray:

@@ -17,13 +17,11 @@ from suture_bt.skills.context import ArmHandle, NeedleBelief
 from suture_bt.skills.grasps import GRASP_DEPTH, hand
 from suture_bt.skills.presentation import (
     DEPTH,
-    DEPTHS,
     DIRECTIONS,
     FACE_ON_WORTH,
     LEVEL_TILTS_DEG,
     MIN_CLEARANCE,
     MIN_NEEDLE_CLEARANCE,
-    NEAR_DEPTHS,
     candidate_poses,
     face_on,
     lifted_first,
@@ -99,16 +97,6 @@ def test_presentation_points_start_at_the_image_centre_and_stay_in_view(phantom)
     for cam in (CAMERA.model.left, CAMERA.model.right):
         uv = cam.project(np.array(points))
         assert np.all((uv >= 0) & (uv < [cam.width, cam.height]))
-
-
-def test_the_nearer_points_come_only_after_every_usual_one():
-    """Nearer the cameras a pinch point stands higher over the tissue: those points are a
-    fallback, after every point at the usual distances, in the same order among themselves."""
-    ctx = make_ctx()
-    depths = [CAMERA.model.left.to_camera(p[None])[0][2] for p in presentation_points(ctx)]
-    n = len(depths) * len(DEPTHS) // (len(DEPTHS) + len(NEAR_DEPTHS))
-    assert set(np.round(depths[:n], 9)) == set(np.round(DEPTHS, 9))
-    assert set(np.round(depths[n:], 9)) == set(np.round(NEAR_DEPTHS, 9))
 
 
 def test_the_arms_own_side_comes_first_at_equal_distance():
