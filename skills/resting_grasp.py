@@ -28,7 +28,7 @@ from suture_bt.geometry import NeedleModel
 from suture_bt.geometry.tissue_surface import height_above_tissue
 from suture_bt.skills.base import SkillFailure
 from suture_bt.skills.grasps import END_MARGIN, GRASP_DEPTH, backed_off, hand, tip_goal
-from suture_bt.transforms import invert, make_transform
+from suture_bt.transforms import invert, make_transform, rpy_to_matrix
 
 #: Largest angle (rad) between the jaws' direction and straight down (−phantom up) for a grasp
 #: from above; a needle tilted more stands on its edge and is taken from the side.
@@ -74,8 +74,7 @@ def turned_over_hand(needle: NeedleModel, arc_angle: float) -> np.ndarray:
 def tilted_about_wire(T_tip_needle: np.ndarray, tilt: float) -> np.ndarray:
     """The same hand with the jaws turned by ``tilt`` (rad) about the wire: about tip x
     through the held wire point, ``GRASP_DEPTH`` behind the tip."""
-    c, s = np.cos(tilt), np.sin(tilt)
-    turn = make_transform(np.array([[1.0, 0.0, 0.0], [0.0, c, -s], [0.0, s, c]]), np.zeros(3))
+    turn = make_transform(rpy_to_matrix((tilt, 0.0, 0.0)))
     to_wire = make_transform(np.eye(3), np.array([0.0, 0.0, -GRASP_DEPTH]))
     new_tip_in_old = to_wire @ turn @ invert(to_wire)
     return invert(new_tip_in_old) @ T_tip_needle

@@ -300,7 +300,7 @@ class PoseFitter:
         if self.probe_slides and hidden_end:
             slide = RivalProbe(self.stereo, self.model, n_mid=2, n_polish=1, starts=slide_starts)
             xs, cs = slide(xf[b], fit_rays, polish, self.final_loss)
-            keep = cs < cf[b]
+            keep = np.where(self._in_range(xs), cs, np.inf) < cf[b]  # as the rivals below
             xf, cf = np.concatenate([xf, xs[keep]]), np.concatenate([cf, cs[keep]])
             b, ok, misses = choose_answer(self._world(xf), cf, priors, self.model)
         # Rivals are the probe's poses (and the first answer, if one of them replaces it):
