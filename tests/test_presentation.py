@@ -17,13 +17,16 @@ from suture_bt.skills.context import ArmHandle, NeedleBelief
 from suture_bt.skills.grasps import GRASP_DEPTH, hand
 from suture_bt.skills.presentation import (
     DEPTH,
+    DEPTHS,
     DIRECTIONS,
     FACE_ON_WORTH,
     LEVEL_TILTS_DEG,
     MIN_CLEARANCE,
     MIN_NEEDLE_CLEARANCE,
+    NEAR_DEPTHS,
     candidate_poses,
     face_on,
+    iter_candidates,
     lifted_first,
     needle_clearance,
     needle_places,
@@ -114,7 +117,14 @@ def test_candidate_poses_reachable_with_the_pinch_on_a_grid_point(phantom, arm_n
     arm = make_arm(arm_name)
     cands = candidate_poses(ctx, arm, limit=8)
     assert len(cands) > 0
-    grid = np.array(presentation_points(ctx, 1.0) + presentation_points(ctx, -1.0))
+    grid = np.array(
+        [
+            p
+            for side in (1.0, -1.0)
+            for d in (DEPTHS, NEAR_DEPTHS)
+            for p in presentation_points(ctx, side, d)
+        ]
+    )
     base = arm.base_frame()
     for T in cands:
         np.testing.assert_allclose(T[:3, :3].T @ T[:3, :3], np.eye(3), atol=1e-12)
@@ -186,6 +196,26 @@ def test_a_presentation_that_may_put_the_needle_into_the_tissue_goes_last():
     ]
     # Highest first, a pose that faces the cameras counted FACE_ON_WORTH higher.
     assert all(a >= b - 1e-9 for a, b in zip(unsafe, unsafe[1:], strict=False))
+
+
+def test_nearer_points_only_when_no_usual_point_is_safe_for_the_arms_own_presentation():
+    """The phantom 8 mm higher: no pinch point at the usual distances is safe for an
+    uncalibrated PSM2 (every offset in the bound considered), so its own presentation goes
+    nearer the cameras, where the pinch point stands higher; a presentation toward the other
+    arm (a handover) keeps to the usual distances (none here); the default scene is unchanged."""
+    arm = make_arm("psm2")
+    raised = make_ctx(make_transform(None, (0.0, 0.0, 0.008)))
+    cands = candidate_poses(raised, arm, limit=4)
+    assert cands
+    for T in cands:
+        depth = CAMERA.model.left.to_camera(pinch(T)[None])[0][2]
+        assert min(abs(depth - d) for d in NEAR_DEPTHS) < 1e-9
+        assert needle_clearance(raised, arm, T) >= MIN_NEEDLE_CLEARANCE
+    assert not list(iter_candidates(raised, arm, toward=make_arm("psm1")))
+    usual = make_ctx()
+    for T in candidate_poses(usual, arm, limit=24):
+        depth = CAMERA.model.left.to_camera(pinch(T)[None])[0][2]
+        assert min(abs(depth - d) for d in DEPTHS) < 1e-9
 
 
 def test_a_needle_of_unknown_pose_faces_the_cameras_as_the_jaw_axis_says():
