@@ -78,14 +78,56 @@ def clear_tip_pose(
 
 def make_way(ctx: TaskContext, target: np.ndarray, keep: str | None = None) -> list[Waiting]:
     """Moves that take every arm but ``keep`` out of the cameras' sight of ``target``."""
+    return make_way_for(ctx, [target], keep)
+
+
+def make_way_for(
+    ctx: TaskContext, targets: list[np.ndarray], keep: str | None = None
+) -> list[Waiting]:
+    """Moves that take every arm but ``keep`` out of the cameras' sight of every target (each
+    arm cleared of one target after the other)."""
     moves = []
     for name, other in ctx.arms.items():
         if name == keep:
             continue
-        T = clear_tip_pose(ctx, other.commanded_tip_world(), other.base_frame()[:3, 3], target)
+        rcm = other.base_frame()[:3, 3]
+        T = None  # the tip moved clear of the targets so far (None: already clear)
+        for target in targets:
+            moved = clear_tip_pose(
+                ctx, other.commanded_tip_world() if T is None else T, rcm, target
+            )
+            T = T if moved is None else moved
         if T is not None and not feasible(other, [T]):
             moves.append(move_to(ctx.clock, other, [T], "make way for the cameras"))
     return moves
+
+
+#: Places along each tool, behind its tip (m), whose shadow on a plane :func:`hidden_behind`
+#: reports: the jaws and the clevis, where a needle lying under an arm hides.
+HIDING_PLACES = (0.0, 0.01, 0.02)
+
+
+def hidden_behind(
+    ctx: TaskContext, point_on_plane: np.ndarray, normal: np.ndarray
+) -> list[np.ndarray]:
+    """Points of a plane (e.g. the tissue top) that each arm's jaws and clevis hide from the
+    cameras: where the sight line from between the eyes through each place of
+    ``HIDING_PLACES`` meets the plane behind the tool (commanded poses, known geometry)."""
+    eye = np.mean(_eyes(ctx), axis=0)
+    n = np.asarray(normal, dtype=float)
+    out = []
+    for arm in ctx.arms.values():
+        T_tip, rcm = arm.commanded_tip_world(), arm.base_frame()[:3, 3]
+        back = (rcm - T_tip[:3, 3]) / np.linalg.norm(rcm - T_tip[:3, 3])
+        for d in HIDING_PLACES:
+            ray = T_tip[:3, 3] + d * back - eye
+            along = float(ray @ n)
+            if abs(along) < 1e-9:
+                continue
+            t = float((np.asarray(point_on_plane, dtype=float) - eye) @ n) / along
+            if t > 1.0:  # the plane lies behind the tool
+                out.append(eye + t * ray)
+    return out
 
 
 #: The holder's own tool as the cameras see it around a presented needle (known instrument

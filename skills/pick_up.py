@@ -33,7 +33,7 @@ from suture_bt.skills import checks
 from suture_bt.skills.base import Skill, SkillFailure, Waiting
 from suture_bt.skills.context import ArmHandle, NeedleNotSeen, NeedleObservation, TaskContext
 from suture_bt.skills.grasps import END_MARGIN, backed_off, held_arc_angle
-from suture_bt.skills.line_of_sight import make_way
+from suture_bt.skills.line_of_sight import hidden_behind, make_way, make_way_for
 from suture_bt.skills.localize_needle import LocalizeNeedle
 from suture_bt.skills.motion import FINE, feasible, jaw_to, move_to, together
 from suture_bt.skills.resting_grasp import (
@@ -211,7 +211,9 @@ class PickUp(Skill):
 
 def look_for_resting(skill: Skill) -> Waiting:
     """Localise a free needle for ``skill``; refused, look once more after the arms make way
-    for where an eye saw needle on the tissue top (an arm may hide it from one eye). A refusal
+    for where an eye saw needle on the tissue top (an arm may hide it from one eye); when no
+    arm stands in the way of that, or no eye saw any, for the tissue under every arm's jaws and
+    clevis (a needle lying under an arm is hidden from both eyes). A refusal
     whose best fit lies flat on the tissue, where a resting needle lies, is checked by a look
     primed with that fit (:func:`_resting_answer`). The first refusal is in
     ``skill.report["first_look"]``; a second refusal fails the skill."""
@@ -225,10 +227,16 @@ def look_for_resting(skill: Skill) -> Waiting:
     if (yield from _resting_answer(skill)):
         return
     seen = seen_on_tissue(ctx)
-    if seen is None:
+    moves = make_way(ctx, seen) if seen is not None else []
+    if not moves:  # nothing stands in the way of what an eye saw, or no eye saw any needle:
+        # it may lie under an arm's jaws, hidden from both eyes; those move out of the way
+        T_ph = ctx.phantom.T_world_phantom
+        top = (T_ph @ np.array([0.0, 0.0, TISSUE_TOP_Z, 1.0]))[:3]
+        moves = make_way_for(ctx, hidden_behind(ctx, top, T_ph[:3, 2]))
+    if not moves and seen is None:
         raise first
     skill.say("not seen clearly: the arms make way and it is looked at again")
-    yield from together(*make_way(ctx, seen))
+    yield from together(*moves)
     try:
         yield from skill.run(LocalizeNeedle(ctx, None))
     except SkillFailure as second:

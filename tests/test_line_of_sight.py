@@ -3,10 +3,19 @@
 import numpy as np
 import pytest
 
+from suture_bt.geometry.phantom import TISSUE_TOP_Z
 from suture_bt.runtime.context_factory import build_context
 from suture_bt.sim.scene import scene_from_dict
 from suture_bt.sim.world import World
-from suture_bt.skills.line_of_sight import CLEARANCE, clear_tip_pose, intrusion
+from suture_bt.skills.line_of_sight import (
+    CLEARANCE,
+    HIDING_PLACES,
+    clear_tip_pose,
+    hidden_behind,
+    intrusion,
+    make_way,
+    make_way_for,
+)
 
 
 @pytest.fixture(scope="module")
@@ -44,3 +53,30 @@ def test_a_tool_beside_or_behind_the_target_is_clear(ctx):
     assert clear_tip_pose(ctx, beside, rcm, target) is None
     # Behind the needle the tip itself hides nothing (only the shaft toward the RCM is checked).
     assert intrusion(ctx, behind, rcm, target) <= intrusion(ctx, beside, rcm, target) + CLEARANCE
+
+
+def test_the_tissue_hidden_under_each_arm_lies_on_the_sight_line_through_its_tool(ctx):
+    T_ph = ctx.phantom.T_world_phantom
+    up, top = T_ph[:3, 2], T_ph[:3, 3] + TISSUE_TOP_Z * T_ph[:3, 2]
+    spots = hidden_behind(ctx, top, up)
+    assert len(spots) == len(ctx.arms) * len(HIDING_PLACES)
+    eye = np.mean(
+        [ctx.camera.model.left.T_world_cam[:3, 3], ctx.camera.model.right.T_world_cam[:3, 3]],
+        axis=0,
+    )
+    tips = [arm.commanded_tip_world()[:3, 3] for arm in ctx.arms.values()]
+    for k, spot in enumerate(spots):
+        assert abs((spot - top) @ up) < 1e-12  # on the plane
+        tip = tips[k // len(HIDING_PLACES)]
+        if k % len(HIDING_PLACES) == 0:  # behind the tip, on the line from the eyes through it
+            u = (tip - eye) / np.linalg.norm(tip - eye)
+            off = (spot - eye) - ((spot - eye) @ u) * u
+            assert np.linalg.norm(off) < 1e-9 and (spot - eye) @ u > (tip - eye) @ u
+
+
+def test_making_way_for_several_targets_clears_each_and_one_target_is_the_same_as_before(ctx):
+    T_ph = ctx.phantom.T_world_phantom
+    spots = hidden_behind(ctx, T_ph[:3, 3] + TISSUE_TOP_Z * T_ph[:3, 2], T_ph[:3, 2])
+    assert len(make_way_for(ctx, spots)) == len(ctx.arms)  # every arm hides its own spots
+    assert len(make_way_for(ctx, spots[:1])) == len(make_way(ctx, spots[0]))
+    assert make_way_for(ctx, []) == []
