@@ -34,7 +34,7 @@ import numpy as np
 from tqdm import tqdm
 
 from suture_bt.calibration.calibrate import CalibrationFailed, estimate_offset
-from suture_bt.calibration.calibration_pose import CALIBRATION_JAW, OFFSET_BOUND
+from suture_bt.calibration.calibration_pose import CALIBRATION_JAW, OFFSET_BOUND, offset_box_points
 from suture_bt.calibration.geometric_baseline import pnp_offset
 from suture_bt.calibration.keypoint_net import KeypointDetector
 from suture_bt.calibration.offset_regressor import OffsetRegressor
@@ -112,12 +112,14 @@ def main(argv=None) -> int:
     offsets = rng.uniform(-1, 1, (args.n, 3)) * OFFSET_BOUND
     named = [("B", a, np.deg2rad(SRC_CONDITIONS["B"][:2]).tolist() + [4e-3]) for a in ARM_NAMES]
     named += [("C", a, np.deg2rad(SRC_CONDITIONS["C"][:2]).tolist() + [-3e-3]) for a in ARM_NAMES]
-    rows = {k: [] for k in ("mlp", "pnp", "oracle_mlp", "oracle_pnp")}
-    tips = {k: [] for k in ("mlp", "pnp")}
-    cond_tips: dict[str, list] = {"B": [], "C": [], "random20": []}
+    corners = [("corner", a, c) for c in offset_box_points(2) for a in ARM_NAMES]
+    rows = {k: [] for k in ("mlp", "mlp_raw", "pnp", "oracle_mlp", "oracle_pnp")}
+    corner_rows: dict[str, list] = {"mlp": [], "mlp_raw": []}
+    tips = {k: [] for k in ("mlp", "mlp_raw", "pnp")}
+    cond_tips: dict[str, list] = {"B": [], "C": [], "random20": [], "corner": []}
     failures: list[str] = []
     t_compute, t_capture = [], []
-    jobs = [("held_out", ARM_NAMES[i % 2], offsets[i]) for i in range(args.n)] + named
+    jobs = [("held_out", ARM_NAMES[i % 2], offsets[i]) for i in range(args.n)] + named + corners
     for kind, arm, offset in tqdm(jobs, desc="calibration benchmark"):
         offset = np.asarray(offset, dtype=float)
         q_meas, _, _, kp_true = scenes.sample(rng, arm, offset=offset)
@@ -134,6 +136,9 @@ def main(argv=None) -> int:
             continue
         t_compute.append(res.compute_ms)
         est = {"mlp": res.offset}
+        est["mlp_raw"] = regressor.predict(
+            arm, res.keypoints[None], cam.width, cam.height, q_meas[None]
+        )[0]
         est["pnp"] = pnp_offset(res.keypoints, q_meas, CALIBRATION_JAW, PSM_BASES[arm], cam)
         if kind == "held_out":
             noisy = kp_true + rng.normal(0, 0.5, kp_true.shape)
@@ -141,6 +146,7 @@ def main(argv=None) -> int:
             oracle_pnp = pnp_offset(noisy, q_meas, CALIBRATION_JAW, PSM_BASES[arm], cam)
             for key, e in (
                 ("mlp", est["mlp"]),
+                ("mlp_raw", est["mlp_raw"]),
                 ("pnp", est["pnp"]),
                 ("oracle_mlp", oracle_mlp),
                 ("oracle_pnp", oracle_pnp),
@@ -152,6 +158,9 @@ def main(argv=None) -> int:
                 cond_tips["random20"].append(tip_errors_mm(arm, targets[arm], offset, est["mlp"]))
         else:
             cond_tips[kind].append(tip_errors_mm(arm, targets[arm], offset, est["mlp"]))
+            if kind == "corner":
+                for key in corner_rows:
+                    corner_rows[key].append((est[key] - offset) / UNITS)
     scenes.close()
 
     result = {
@@ -173,6 +182,7 @@ def main(argv=None) -> int:
                 "mean": round(float(flat.mean()), 4),
                 "p95": round(float(np.percentile(flat, 95)), 4),
             }
+    result["corners"] = {k: _stats(np.array(r)) for k, r in corner_rows.items() if r}
     result["tip_err_mlp_by_condition_mm"] = {
         k: {"mean": round(float(np.mean(v)), 4), "p95": round(float(np.percentile(v, 95)), 4)}
         for k, v in cond_tips.items()

@@ -4,8 +4,10 @@ A :class:`Calibration` is ticked by its caller (a skill): ``start()`` checks the
 commands the arm to its calibration pose with the jaw open; each ``step(dt)`` advances it
 through ``moving`` → ``settling`` → ``done`` (or ``failed``) without blocking. At ``done`` it has
 captured one left-eye image, found the 4 jaw keypoints (keypoint CNN on a window around where
-the measured joints put the wrist), predicted Δq̂ with the MLP regressor (or the PnP baseline),
-checked the result, and installed Δq̂ in the servo's offset compensator when one was given.
+the measured joints put the wrist), predicted Δq̂ with the MLP regressor and refined it to the
+arm pose the keypoints show (:mod:`reprojection_refine`; ``mlp_raw``: the MLP alone; or the PnP
+baseline), checked the result, and installed Δq̂ in the servo's offset compensator when one was
+given.
 
 Failure is a :class:`CalibrationFailed` with a ``reason`` (also kept on the object):
 ``setup`` (the arm base or camera differs from the geometry the regressor was trained for, or
@@ -33,6 +35,7 @@ from suture_bt.calibration.calibration_pose import (
 from suture_bt.calibration.geometric_baseline import pnp_offset
 from suture_bt.calibration.jaw_keypoints import project_keypoints
 from suture_bt.calibration.keypoint_net import KEYPOINT_SIGMA_PX
+from suture_bt.calibration.reprojection_refine import refine_offset
 from suture_bt.calibration.scene_geometry import PSM_BASES, REFERENCE_SIZE, eye_pose
 
 #: Δq̂ beyond the bounds by more than this factor is implausible.
@@ -101,18 +104,21 @@ def estimate_offset(
     """Δq̂ from one left-eye image taken at the calibration pose; raises CalibrationFailed."""
     t0 = time.perf_counter()
     detector = detector or _shipped("detector")
-    if method == "mlp":
+    if method in ("mlp", "mlp_raw"):
         regressor = regressor or _shipped("regressor")
     q_meas = np.asarray(q_meas, dtype=float)
     T_base = PSM_BASES[arm]
     expected = project_keypoints(q_meas, CALIBRATION_JAW, T_base, cam)[0]
     kp, conf, _ = detector.detect(image, cam, expected.mean(0))
-    if method == "mlp":
+    if method in ("mlp", "mlp_raw"):
         offset = regressor.predict(arm, kp[None], cam.width, cam.height, q_meas[None])[0]
+        if method == "mlp":  # refined to the pose the detections show (reprojection_refine)
+            sigma = np.asarray(KEYPOINT_SIGMA_PX) * cam.height / REFERENCE_SIZE[1]
+            offset = refine_offset(offset, kp, q_meas, CALIBRATION_JAW, T_base, cam, sigma)
     elif method == "pnp":
         offset = pnp_offset(kp, q_meas, CALIBRATION_JAW, T_base, cam)
     else:
-        raise ValueError(f"method must be 'mlp' or 'pnp', got {method!r}")
+        raise ValueError(f"method must be 'mlp', 'mlp_raw' or 'pnp', got {method!r}")
     q_est = q_meas.copy()
     q_est[:3] += offset
     reproj = project_keypoints(q_est, CALIBRATION_JAW, T_base, cam)[0]
