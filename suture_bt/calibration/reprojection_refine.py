@@ -2,7 +2,7 @@
 
 The seed's MLP maps keypoint pixels to Δq̂ in one step; near the edges of the offset box it
 trained on it shrinks toward the middle (at the corner (5°, 5°, 5 mm): 0.25°, 0.25°, 0.33 mm
-short, its keypoint residual 11.7σ where the detections fit to 0.5σ). A few Gauss-Newton
+short, its keypoint residual 11.7σ where the detections fit to 0.5σ). Levenberg-Marquardt
 steps of the keypoint reprojection error over the three offsets, from the MLP's answer, take
 the estimate to the arm pose the detections show: the kinematic model and the camera only,
 as in the residual check that follows.
