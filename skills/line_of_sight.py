@@ -114,20 +114,27 @@ def hidden_behind(
     cameras: where the sight line from between the eyes through each place of
     ``HIDING_PLACES`` meets the plane behind the tool (commanded poses, known geometry)."""
     eye = np.mean(_eyes(ctx), axis=0)
-    n = np.asarray(normal, dtype=float)
     out = []
     for arm in ctx.arms.values():
         T_tip, rcm = arm.commanded_tip_world(), arm.base_frame()[:3, 3]
         back = (rcm - T_tip[:3, 3]) / np.linalg.norm(rcm - T_tip[:3, 3])
         for d in HIDING_PLACES:
             ray = T_tip[:3, 3] + d * back - eye
-            along = float(ray @ n)
-            if abs(along) < 1e-9:
-                continue
-            t = float((np.asarray(point_on_plane, dtype=float) - eye) @ n) / along
-            if t > 1.0:  # the plane lies behind the tool
+            t = ray_meets_plane(eye, ray, point_on_plane, normal)
+            if t is not None and t > 1.0:  # the plane lies behind the tool
                 out.append(eye + t * ray)
     return out
+
+
+def ray_meets_plane(
+    origin: np.ndarray, ray: np.ndarray, point_on_plane: np.ndarray, normal: np.ndarray
+) -> float | None:
+    """t such that ``origin + t · ray`` lies on the plane (None: the ray runs along it)."""
+    n = np.asarray(normal, dtype=float)
+    along = float(ray @ n)
+    if abs(along) < 1e-9:
+        return None
+    return float((np.asarray(point_on_plane, dtype=float) - origin) @ n) / along
 
 
 #: The holder's own tool as the cameras see it around a presented needle (known instrument

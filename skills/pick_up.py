@@ -33,7 +33,12 @@ from suture_bt.skills import checks
 from suture_bt.skills.base import Skill, SkillFailure, Waiting
 from suture_bt.skills.context import ArmHandle, NeedleNotSeen, NeedleObservation, TaskContext
 from suture_bt.skills.grasps import END_MARGIN, backed_off, held_arc_angle
-from suture_bt.skills.line_of_sight import hidden_behind, make_way, make_way_for
+from suture_bt.skills.line_of_sight import (
+    hidden_behind,
+    make_way,
+    make_way_for,
+    ray_meets_plane,
+)
 from suture_bt.skills.localize_needle import LocalizeNeedle
 from suture_bt.skills.motion import FINE, feasible, jaw_to, move_to, together
 from suture_bt.skills.resting_grasp import (
@@ -230,9 +235,7 @@ def look_for_resting(skill: Skill) -> Waiting:
     moves = make_way(ctx, seen) if seen is not None else []
     if not moves:  # nothing stands in the way of what an eye saw, or no eye saw any needle:
         # it may lie under an arm's jaws, hidden from both eyes; those move out of the way
-        T_ph = ctx.phantom.T_world_phantom
-        top = (T_ph @ np.array([0.0, 0.0, TISSUE_TOP_Z, 1.0]))[:3]
-        moves = make_way_for(ctx, hidden_behind(ctx, top, T_ph[:3, 2]))
+        moves = make_way_for(ctx, hidden_behind(ctx, *tissue_top(ctx)))
     if not moves and seen is None:
         raise first
     skill.say("not seen clearly: the arms make way and it is looked at again")
@@ -280,13 +283,14 @@ def seen_on_tissue(ctx: TaskContext) -> np.ndarray | None:
     u, v = np.asarray(px, dtype=float).mean(axis=0)
     ray = cam.T_world_cam[:3, :3] @ np.array([(u - cam.cx) / cam.fx, (v - cam.cy) / cam.fy, 1.0])
     origin = cam.T_world_cam[:3, 3]
+    t = ray_meets_plane(origin, ray, *tissue_top(ctx))
+    return origin + t * ray if t is not None and t > 0 else None
+
+
+def tissue_top(ctx: TaskContext) -> tuple[np.ndarray, np.ndarray]:
+    """A point of the phantom's flat tissue top and its up normal (world)."""
     T_ph = ctx.phantom.T_world_phantom
-    up, top = T_ph[:3, 2], (T_ph @ np.array([0.0, 0.0, TISSUE_TOP_Z, 1.0]))[:3]
-    along = float(ray @ up)
-    if abs(along) < 1e-9:
-        return None
-    t = float((top - origin) @ up) / along
-    return origin + t * ray if t > 0 else None
+    return (T_ph @ np.array([0.0, 0.0, TISSUE_TOP_Z, 1.0]))[:3], T_ph[:3, 2]
 
 
 def _as_observation(belief, T_world_needle: np.ndarray) -> NeedleObservation:
