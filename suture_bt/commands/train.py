@@ -27,6 +27,7 @@ def _needle(args) -> dict:
         cfg.steps = args.steps
     if args.minutes is not None:
         cfg.minutes = args.minutes
+    cfg.threads = args.threads
     out = Path(args.out) if args.out else DEFAULT_WEIGHTS
     return train(Path(args.data or DEFAULT_DATA["needle"]), out, cfg) | {"weights": str(out)}
 
@@ -47,6 +48,7 @@ def register(subparsers) -> None:
     p.add_argument("--seed", type=int, default=0, help="random seed (default 0)")
     p.add_argument("--steps", type=int, help="maximum number of updates")
     p.add_argument("--minutes", type=float, help="wall-time cap in minutes")
+    p.add_argument("--threads", type=int, default=1, help="torch threads (default 1)")
 
 
 def run(args) -> int:
