@@ -66,6 +66,8 @@ def test_the_resting_fraction_changes_only_the_needle_start():
         Randomization(tilt_deg=20.0)
     with pytest.raises(ValueError, match="resting place"):
         Randomization(resting_place="anywhere")
+    with pytest.raises(ValueError, match="brightness"):
+        Randomization(brightness=(1.5, 0.5))
 
 
 def test_default_phantom_draws_are_kept_and_wide_ones_keep_every_port_in_view():
@@ -257,8 +259,11 @@ def test_the_eval_command_parses_every_option_and_reports_without_running(tmp_pa
     argv += ["--time-budget", "30", "--resting-fraction", "0.5", "--servo", "nominal"]
     argv += ["--rerun", "save", "--tree", "single_throw", "--out", str(tmp_path)]
     argv += ["--phantom-xy", "20", "--phantom-yaw", "15", "--phantom-tilt", "4"]
+    argv += ["--brightness", "0.5", "1.8"]
     config = eval_command._config(build_parser().parse_args(argv))
     rz = config.randomization
+    assert rz.brightness == (0.5, 1.8)
+    assert all(0.5 <= draw(config, i)["camera"]["brightness"] <= 1.8 for i in range(20))
     assert (rz.phantom_xy_mm, rz.phantom_z_mm, rz.phantom_yaw_deg, rz.tilt_deg) == (20, 1.5, 15, 4)
     assert (config.seed, config.tree, config.policy, config.rerun) == (
         4,

@@ -89,6 +89,9 @@ class Randomization:
         ):
             if not 0.0 <= value <= bound:
                 raise ValueError(f"{name} must be in [0, {bound:g}], got {value}")
+        lo, hi = self.brightness
+        if not 0.2 <= lo <= hi <= 3.0:
+            raise ValueError(f"brightness range must lie in [0.2, 3], got {lo}..{hi}")
         if self.resting_place not in ("view", "src"):
             raise ValueError(f"resting place must be view or src, got {self.resting_place!r}")
         if self.servo not in ("nominal", "drawn"):

@@ -82,6 +82,15 @@ def register(subparsers) -> None:
             help=f"phantom {what} drawn within ± this (default {getattr(jitter, field):g})",
         )
     p.add_argument(
+        "--brightness",
+        type=float,
+        nargs=2,
+        default=jitter.brightness,
+        metavar=("LO", "HI"),
+        help=f"camera gain drawn in [LO, HI] (default {jitter.brightness[0]:g} "
+        f"{jitter.brightness[1]:g})",
+    )
+    p.add_argument(
         "--servo",
         choices=("drawn", "nominal"),
         default="drawn",
@@ -144,6 +153,7 @@ def _config(args):
             phantom_z_mm=args.phantom_z,
             phantom_yaw_deg=args.phantom_yaw,
             tilt_deg=args.phantom_tilt,
+            brightness=tuple(args.brightness),
             servo=args.servo,
         ),
     )
