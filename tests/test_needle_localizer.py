@@ -60,7 +60,7 @@ def test_shipped_network_localizes_a_rendered_needle(monkeypatch):
     try:
         for i in range(40):  # the first seeded scene whose needle is in full view
             rng = np.random.default_rng([2024, i])
-            s = sim.sampler.sample(rng, scenario="free", zr=(0.08, 0.12), brightness=(0.7, 2.0))
+            s = sim.sampler.sample(rng, scenario="free", zr=(0.08, 0.12))
             s = s.__class__(s.scenario, s.T_world_needle, s.q, s.jaw, 1.0, 2.0)
             sim.apply(s)
             left, mask = sim.render("left", s, rng)

@@ -160,7 +160,7 @@ def test_rendered_held_needle_with_its_holders_prior_and_a_contradicting_one():
         loc = NeedleLocalizer(sim.stereo)
         for i in range(20):  # the first seeded held scene the localiser answers
             rng = np.random.default_rng([77, i])
-            s = sim.sampler.sample(rng, scenario="held_psm2", zr=(0.06, 0.1), brightness=(0.7, 2.0))
+            s = sim.sampler.sample(rng, scenario="held_psm2", zr=(0.06, 0.1))
             s = s.__class__(s.scenario, s.T_world_needle, s.q, s.jaw, 1.0, 2.0)
             sim.apply(s)
             left, _ = sim.render("left", s, rng)

@@ -2,9 +2,9 @@
 
 Front door (may import ``suture_bt.sim``; labels come from the ground-truth side of the sim:
 the needle body's true pose and the renderer's segmentation). Each scene places the needle
-resting on the tissue, held in either jaw (also 20-70 mm from the cameras, often edge-on),
-partly inserted in a port, or free in view 80-200 mm from the cameras; the arms are posed at
-random, often through the view (occlusion); brightness varies 0.5-2× and sensor noise is added.
+resting on the tissue, held in either jaw, partly inserted in a port, or free in view 80-200
+mm from the cameras; the arms are posed at random, often through the view (occlusion);
+brightness varies up to 2× and sensor noise is added.
 
 Dataset layout (``out/``): ``shard_XXXX.npz`` with ``images`` (n, H, W, 3) uint8 at the network
 input size, ``masks`` (n, H, W) uint8 needle coverage ×255, ``keypoints`` (n, 2, 2) base/tip
@@ -26,15 +26,12 @@ from tqdm import tqdm
 from suture_bt.geometry import NeedleModel
 from suture_bt.geometry.phantom import TISSUE_TOP_Z
 from suture_bt.interfaces import CameraModel, StereoCameraModel
-from suture_bt.kinematics import UnreachablePoseError, forward_kinematics, inverse_kinematics
+from suture_bt.kinematics import forward_kinematics
 from suture_bt.perception.network import INPUT_SIZE
 from suture_bt.transforms import invert, make_transform, rpy_to_matrix
 
-SCENARIOS = ("resting", "held_psm1", "held_psm2", "in_port", "free", "held_near")
-SCENARIO_WEIGHTS = (0.17, 0.17, 0.17, 0.13, 0.21, 0.15)
-#: Camera depths (m) of a needle held close to the cameras (``held_near``): the Task 3 start
-#: holds it 27-50 mm from the left eye, nearly edge-on, partly inside the jaw.
-NEAR_ZR = (0.018, 0.08)
+SCENARIOS = ("resting", "held_psm1", "held_psm2", "in_port", "free")
+SCENARIO_WEIGHTS = (0.2, 0.2, 0.2, 0.15, 0.25)
 #: Render size for training images (one EGL tile), downsampled ×2 to the network input.
 RENDER_SIZE = (960, 544)
 #: Joint sampling ranges for random arm poses (rad, rad, m, rad, rad, rad).
@@ -133,41 +130,8 @@ class SceneSampler:
                 return q
         return q
 
-    def _held_near(self, rng, q: dict, jaw: dict) -> np.ndarray | None:
-        """A needle in a jaw 20-70 mm from the cameras (``q``/``jaw`` updated), or None when
-        the drawn tip pose is out of the arm's reach. The tip goes to a random spot of the
-        left view; half the time its approach axis (the needle's normal) is turned across
-        the line of sight, which shows the needle edge-on, as at the Task 3 start."""
-        arm = ("psm1", "psm2")[int(rng.integers(2))]
-        cam = self.stereo.left
-        z = rng.uniform(0.02, 0.07)
-        u, v = rng.uniform(0.2, 0.8) * cam.width, rng.uniform(0.2, 0.8) * cam.height
-        p = np.array([(u - cam.cx) / cam.fx * z, (v - cam.cy) / cam.fy * z, z])
-        R = _random_rotation(rng)
-        if rng.random() < 0.5:
-            ray = p / np.linalg.norm(p)
-            axis = R[:, 2] - ray * (R[:, 2] @ ray) + rng.normal(0.0, 0.15, 3)
-            axis /= np.linalg.norm(axis)
-            x = np.cross(R[:, 1], axis)
-            x /= np.linalg.norm(x)
-            R = np.stack([x, np.cross(axis, x), axis], 1)
-        T_tip = cam.T_world_cam @ make_transform(R, p)
-        try:
-            q[arm] = inverse_kinematics(invert(self.bases[arm]) @ T_tip)
-        except UnreachablePoseError:
-            return None
-        jaw[arm] = 0.08
-        a = rng.uniform(self.model.tip_angle + 0.3, self.model.base_angle - 0.1)
-        return T_tip @ grasp_transform(self.model, a, bool(rng.integers(2)))
-
-    def sample(
-        self,
-        rng: np.random.Generator,
-        scenario: str | None = None,
-        zr=(0.07, 0.21),
-        brightness: tuple[float, float] = (0.5, 2.0),
-    ):
-        """A scene; ``zr`` bounds the needle's camera depth (m), ``brightness`` the image gain."""
+    def sample(self, rng: np.random.Generator, scenario: str | None = None, zr=(0.07, 0.21)):
+        """A scene; ``zr`` bounds the needle's camera depth (m)."""
         if scenario is None:
             scenario = str(rng.choice(SCENARIOS, p=SCENARIO_WEIGHTS))
         q = {a: self._arm_q(a, rng, rng.random() < 0.7) for a in ("psm1", "psm2")}
@@ -189,10 +153,6 @@ class SceneSampler:
                 T = self.T_world_phantom @ make_transform(
                     R, (x, y, TISSUE_TOP_Z + self.model.wire_radius)
                 )
-            elif scenario == "held_near":
-                T = self._held_near(rng, q, jaw)
-                if T is None:
-                    continue
             elif scenario.startswith("held"):
                 arm = scenario.split("_")[1]
                 q[arm] = self._arm_q(arm, rng, True)
@@ -224,8 +184,7 @@ class SceneSampler:
                 v = rng.uniform(0.15, 0.85) * cam.height
                 pc = np.array([(u - cam.cx) / cam.fx * z, (v - cam.cy) / cam.fy * z, z])
                 T = cam.T_world_cam @ make_transform(_random_rotation(rng), pc)
-            near = scenario == "held_near"
-            if self._needle_ok(T, NEAR_ZR if near else zr, allow_buried=scenario == "in_port"):
+            if self._needle_ok(T, zr, allow_buried=scenario == "in_port"):
                 break
         else:  # last resort (not reached in 1500 test draws): a needle resting beside the ridge
             scenario = "resting"
@@ -237,7 +196,7 @@ class SceneSampler:
             T,
             q,
             jaw,
-            brightness=float(rng.uniform(*brightness)),
+            brightness=float(rng.uniform(0.7, 2.0)),
             noise_std=float(rng.uniform(0.0, 6.0)),
         )
 
