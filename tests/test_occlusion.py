@@ -131,3 +131,17 @@ def test_a_piece_beside_the_needles_own_thin_fringe_is_kept():
     out = np.zeros((200, 320), bool)
     out[50:170, 90:270] = without_occluder_rims(img, view, RULE, 3).mask
     assert out[150:153, 120:130].all()
+
+
+def test_a_violet_band_piece_along_the_jaws_outline_is_kept():
+    """The swage band a jaw cuts off hugs the jaw like a rim does, but it is violet (the
+    needle's base), not the jaw's grey: it stays, while a grey sliver in its place goes."""
+    violet = (126, 50, 142)
+    img, view = _wire_jaw_rim_and_stub()
+    img[57:60, 203:241] = violet  # the sliver along the jaw's top, now the band
+    out = np.zeros((200, 320), bool)
+    out[50:150, 90:270] = without_occluder_rims(img, view, RULE, 3).mask
+    assert out[57:60, 203:241].all() and out[98:103, 100:201].all()
+    img[57:60, 203:241] = GREY
+    out[50:150, 90:270] = without_occluder_rims(img, view, RULE, 3).mask
+    assert not out[57:60, 203:241].any()

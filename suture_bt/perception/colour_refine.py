@@ -34,6 +34,13 @@ class ColourRule:
     min_component_px: int = 4
 
 
+def violet_score(rgb: np.ndarray) -> np.ndarray:
+    """Per pixel ((R + B)/2 − G) / level: ≈ 0.9 on the violet swage band, ≈ 0 on grey metal."""
+    c = rgb.astype(np.float32)
+    level = np.maximum(c.mean(-1), 1.0)
+    return (0.5 * (c[..., 0] + c[..., 2]) - c[..., 1]) / level
+
+
 def needle_coloured(rgb: np.ndarray, rule: ColourRule) -> np.ndarray:
     """Pixels passing the needle colour test (grey metal: the needle and the instruments)."""
     c = rgb.astype(np.int16)

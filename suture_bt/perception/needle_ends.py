@@ -18,7 +18,7 @@ import numpy as np
 
 from suture_bt.geometry import NeedleModel
 from suture_bt.interfaces import CameraModel
-from suture_bt.perception.colour_refine import ColourRule, needle_coloured
+from suture_bt.perception.colour_refine import ColourRule, needle_coloured, violet_score
 from suture_bt.perception.needle_projection import end_pixels, project_cam, transform_points
 from suture_bt.perception.pose_fit import MaskView
 from suture_bt.transforms import invert
@@ -49,13 +49,6 @@ def swapped(T_cam_needle: np.ndarray, model: NeedleModel) -> np.ndarray:
     T = np.array(T_cam_needle, dtype=float)
     T[:3, :3] = T[:3, :3] @ swap_rotation(model)
     return T
-
-
-def violet_score(rgb: np.ndarray) -> np.ndarray:
-    """Per pixel ((R + B)/2 − G) / level: ≈ 0.9 on the violet band, ≈ 0 on grey metal."""
-    c = rgb.astype(np.float32)
-    level = np.maximum(c.mean(-1), 1.0)
-    return (0.5 * (c[..., 0] + c[..., 2]) - c[..., 1]) / level
 
 
 #: Largest band piece (px) relative to the band's area seen at the given depth: a bigger violet

@@ -15,7 +15,7 @@ from dataclasses import replace
 import cv2
 import numpy as np
 
-from suture_bt.perception.colour_refine import ColourRule, needle_coloured
+from suture_bt.perception.colour_refine import ColourRule, needle_coloured, violet_score
 from suture_bt.perception.pose_fit import MaskView, edge_points
 
 #: Extensions (fractions of the visible chord) tried for an occluded end.
@@ -102,6 +102,11 @@ def with_occluder(rgb: np.ndarray, view: MaskView, rule: ColourRule) -> MaskView
 #: A mask piece with at least this share of its pixels within ``reach_px`` of an occluder hugs
 #: its outline: a lit rim of the jaw or shaft that the colour test took for wire.
 RIM_SHARE = 0.6
+#: A mask piece with at least this share of violet pixels is the swage band, never a rim: the
+#: jaws and shafts are grey, and a band a jaw cuts off hugs that jaw's outline.
+BAND_PIECE_SHARE = 0.5
+#: Violet score of a band pixel (the band scores 0.6-0.9, grey metal about 0).
+BAND_PIECE_SCORE = 0.45
 
 
 def without_occluder_rims(
@@ -115,7 +120,9 @@ def without_occluder_rims(
     A needle piece cut off by a jaw touches it only at the cut; a sliver of the jaw's lit rim
     runs along it. Left in, such a sliver a few pixels off the wire pulls the fit's wide-basin
     search stages off the needle (1080p benchmark: one needle fitted 15 mm / 145 deg off).
-    The largest piece is always kept.
+    The largest piece is always kept, and so is a violet piece: the swage band that a jaw cuts
+    off from the rest of the needle hugs the jaw too, yet it is the needle's base (session 18:
+    a band dropped here let a fit swing its base behind the jaw, 19.7° off).
     """
     n, lab = cv2.connectedComponents(view.mask.astype(np.uint8), connectivity=8)
     if n <= 2:
@@ -130,6 +137,10 @@ def without_occluder_rims(
     share = np.bincount(lab[near].ravel(), minlength=n) / np.maximum(counts, 1)
     share[0] = 0.0
     share[np.argmax(np.where(np.arange(n) > 0, counts, -1))] = 0.0
+    ys, xs = np.nonzero(lab)
+    violet = violet_score(rgb[ys + y0, xs + x0]) > BAND_PIECE_SCORE
+    band_share = np.bincount(lab[ys, xs][violet], minlength=n) / np.maximum(counts, 1)
+    share[band_share >= BAND_PIECE_SHARE] = 0.0
     rims = np.nonzero(share >= RIM_SHARE)[0]
     if not len(rims):
         return view
