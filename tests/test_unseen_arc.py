@@ -129,10 +129,10 @@ def test_the_mirror_twin_of_a_needle_behind_a_jaw_runs_over_background():
     wrong = arc_exposure(imgs, tuple(occ), st, twin, MODEL, hw)
     assert truth.worst == 0.0
     # Here the twin's course stays near the hidden wire in both images: 2.8 mm of it shows
-    # over background (below the refusal threshold; the twins of the held needle at the Task 3
-    # start expose 6-9 mm, see the benchmark figures in the report).
+    # over background, over the refusal threshold since session 18 (2 mm; it was 3.5 mm, and
+    # the twins of the held needle at the Task 3 start expose 6-9 mm).
     assert wrong.both > 0.002 and wrong.both > 2 * truth.both
-    assert MAX_EXPOSED > wrong.both
+    assert MAX_EXPOSED < wrong.both
 
 
 def test_tissue_model_hides_what_the_block_is_in_front_of():
@@ -178,5 +178,8 @@ def test_localizer_refuses_the_mirror_twin_of_the_held_needle_at_the_task3_start
     loc.max_rival_ratio = 0.0
     with pytest.raises(NeedleNotFound, match="hidden by nothing"):
         loc.localize(left, right)
-    with pytest.raises(NeedleNotFound, match="another pose"):
+    # With the rival gate on, one of the two refuses it (since session 18 keeps the swage band
+    # that hugs the jaw in the mask, the fit's final twin has no close rival left, and the
+    # exposure gate speaks).
+    with pytest.raises(NeedleNotFound, match="another pose|hidden by nothing"):
         NeedleLocalizer(stereo_model, tissue=tissue).localize(left, right)
