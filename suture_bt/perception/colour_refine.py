@@ -34,6 +34,10 @@ class ColourRule:
     min_component_px: int = 4
 
 
+#: A pixel this violet (well above sensor noise on dim metal) is the swage band's.
+BAND_PIXEL_SCORE = 0.45
+
+
 def violet_score(rgb: np.ndarray) -> np.ndarray:
     """Per pixel ((R + B)/2 − G) / level: ≈ 0.9 on the violet swage band, ≈ 0 on grey metal."""
     c = rgb.astype(np.float32)

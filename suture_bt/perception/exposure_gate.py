@@ -22,10 +22,11 @@ from suture_bt.perception.unseen_arc import ArcExposure, arc_exposure, below_por
 #: A final fit whose model arc runs longer than this (m of arc, in all, in both eyes) over pixels
 #: where neither the needle nor anything that could hide it is seen (a jaw or shaft, the
 #: border, the tissue where the known phantom can hide it: :mod:`unseen_arc`) is refused:
-#: wire the image says is not there. Development seed 6173 (25 scenes per set, every set):
-#: correct answers exposed at most 2.8 mm (both eyes) / 4.2 mm (one eye); the mirror twins
-#: of the held needle at the Task 3 start 6.3-8.7 mm, of a needle in a port 9.4 mm (and 4.9
-#: mm in all for one whose exposed arc is split into runs by stretches the ridge hides).
+#: wire the image says is not there. When it was set (development seed 6173, 25 scenes per
+#: set, every set, an earlier session's localiser): correct answers exposed at most 2.8 mm
+#: (both eyes) / 4.2 mm (one eye); the mirror twins of the held needle at the Task 3 start
+#: 6.3-8.7 mm, of a needle in a port 9.4 mm (and 4.9 mm in all for one whose exposed arc is
+#: split into runs by stretches the ridge hides).
 #: Lowered from 3.5 mm in session 18 for a tilt-mirror twin of an occluded held needle that
 #: exposed 2.4 mm in both eyes (development seed 6173, `occluded` scene 27, 18.8 mm / 154°
 #: off). With the gate off, none of the 1339 right answers of seeds 1000, 2000 (60 scenes per

@@ -18,7 +18,12 @@ import numpy as np
 
 from suture_bt.geometry import NeedleModel
 from suture_bt.interfaces import CameraModel
-from suture_bt.perception.colour_refine import ColourRule, needle_coloured, violet_score
+from suture_bt.perception.colour_refine import (
+    BAND_PIXEL_SCORE,
+    ColourRule,
+    needle_coloured,
+    violet_score,
+)
 from suture_bt.perception.needle_projection import end_pixels, project_cam, transform_points
 from suture_bt.perception.pose_fit import MaskView
 from suture_bt.transforms import invert
@@ -31,8 +36,6 @@ MIN_END_PIXELS = 3
 VIOLET_THRESHOLD = 0.3
 #: |evidence| below this is undecided (the band is hidden or too small to see).
 MIN_EVIDENCE = 0.15
-#: A mask pixel this violet (well above sensor noise on dim metal) counts as band.
-BAND_PIXEL_SCORE = 0.45
 #: Fewest band pixels in one eye for their position to vote.
 MIN_BAND_PIXELS = 6
 

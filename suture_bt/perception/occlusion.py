@@ -15,7 +15,12 @@ from dataclasses import replace
 import cv2
 import numpy as np
 
-from suture_bt.perception.colour_refine import ColourRule, needle_coloured, violet_score
+from suture_bt.perception.colour_refine import (
+    BAND_PIXEL_SCORE,
+    ColourRule,
+    needle_coloured,
+    violet_score,
+)
 from suture_bt.perception.pose_fit import MaskView, edge_points
 
 #: Extensions (fractions of the visible chord) tried for an occluded end.
@@ -105,8 +110,6 @@ RIM_SHARE = 0.6
 #: A mask piece with at least this share of violet pixels is the swage band, never a rim: the
 #: jaws and shafts are grey, and a band a jaw cuts off hugs that jaw's outline.
 BAND_PIECE_SHARE = 0.5
-#: Violet score of a band pixel (the band scores 0.6-0.9, grey metal about 0).
-BAND_PIECE_SCORE = 0.45
 
 
 def without_occluder_rims(
@@ -138,7 +141,7 @@ def without_occluder_rims(
     share[0] = 0.0
     share[np.argmax(np.where(np.arange(n) > 0, counts, -1))] = 0.0
     ys, xs = np.nonzero(lab)
-    violet = violet_score(rgb[ys + y0, xs + x0]) > BAND_PIECE_SCORE
+    violet = violet_score(rgb[ys + y0, xs + x0]) > BAND_PIXEL_SCORE
     band_share = np.bincount(lab[ys, xs][violet], minlength=n) / np.maximum(counts, 1)
     share[band_share >= BAND_PIECE_SHARE] = 0.0
     rims = np.nonzero(share >= RIM_SHARE)[0]
