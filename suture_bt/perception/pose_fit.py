@@ -63,7 +63,13 @@ from suture_bt.perception.needle_projection import (
 )
 from suture_bt.perception.prior_term import PriorTerm
 from suture_bt.perception.refusal import NeedleNotFound
-from suture_bt.perception.rival_probe import FitRays, RivalProbe, rival, slide_starts
+from suture_bt.perception.rival_probe import (
+    FitRays,
+    RivalProbe,
+    near_starts,
+    rival,
+    slide_starts,
+)
 
 #: A clearly different second-stage pose costing at most this much more than the best also
 #: seeds the second search (1.3 gave the same answers on the benchmarks for 10 ms more).
@@ -156,6 +162,9 @@ class PoseFitter:
     #: Whether an answer with a hidden end (or given priors) is slid along its own circle in
     #: search of a cheaper pose (:mod:`rival_probe`, where its development figures are).
     probe_slides: bool = True
+    #: Whether the answer is also turned by a few degrees in search of a cheaper basin next to
+    #: it (:mod:`rival_probe`).
+    probe_near: bool = True
 
     def fit(
         self,
@@ -301,6 +310,19 @@ class PoseFitter:
             slide = RivalProbe(self.stereo, self.model, n_mid=2, n_polish=1, starts=slide_starts)
             xs, cs = slide(xf[b], fit_rays, polish, self.final_loss)
             keep = np.where(self._in_range(xs), cs, np.inf) < cf[b]  # as the rivals below
+            xf, cf = np.concatenate([xf, xs[keep]]), np.concatenate([cf, cs[keep]])
+            b, ok, misses = choose_answer(self._world(xf), cf, priors, self.model)
+        if self.probe_near:
+            near_probe = RivalProbe(
+                self.stereo,
+                self.model,
+                n_mid=2,
+                n_polish=1,
+                starts=near_starts,
+                apart_from_answer=False,
+            )
+            xs, cs = near_probe(xf[b], fit_rays, polish, self.final_loss)
+            keep = np.where(self._in_range(xs), cs, np.inf) < cf[b]
             xf, cf = np.concatenate([xf, xs[keep]]), np.concatenate([cf, cs[keep]])
             b, ok, misses = choose_answer(self._world(xf), cf, priors, self.model)
         # Rivals are the probe's poses (and the first answer, if one of them replaces it):

@@ -46,6 +46,8 @@ from suture_bt.perception.needle_projection import params_to_pose, pose_to_param
 PROBE_ANGLES_DEG = (-40.0, -20.0, 20.0, 40.0)
 #: Slides (deg) of the answer along its own circle that the slide probe starts from.
 SLIDE_ANGLES_DEG = (-16.0, -8.0, 8.0, 16.0)
+#: Small turns (deg) of the answer that the near probe starts from.
+NEAR_ANGLES_DEG = (-8.0, -4.0, 4.0, 8.0)
 #: Two poses further apart than this (mm or deg) are different answers: the benchmark's
 #: "wrong" line, the accuracy a caller may rely on.
 DISTINCT_MM, DISTINCT_DEG = 2.0, 5.0
@@ -72,6 +74,19 @@ def probe_starts(T: np.ndarray, model: NeedleModel) -> np.ndarray:
         block[:, :3, :3] = R @ T[:3, :3]
         block[:, :3, 3] = (R @ (T[:3, 3] - p)) + p
         block[:, 3, 3] = 1.0
+    return out
+
+
+def near_starts(T: np.ndarray, model: NeedleModel) -> np.ndarray:
+    """Poses (K, 4, 4, left camera) turned from ``T`` by NEAR_ANGLES_DEG about the camera's x
+    and y axes and the needle's x and y axes, through the arc centre."""
+    axes = [np.array([1.0, 0.0, 0.0]), np.array([0.0, 1.0, 0.0]), T[:3, 0], T[:3, 1]]
+    angles = np.deg2rad(NEAR_ANGLES_DEG)
+    R = Rotation.from_rotvec(np.array([a * ax for ax in axes for a in angles])).as_matrix()
+    out = np.zeros((len(R), 4, 4))
+    out[:, :3, :3] = R @ T[:3, :3]
+    out[:, :3, 3] = T[:3, 3]
+    out[:, 3, 3] = 1.0
     return out
 
 
@@ -123,6 +138,9 @@ class RivalProbe:
     n_polish: int = 2
     #: Where the probe starts from, given the answer (pose, model) → poses.
     starts: Callable[[np.ndarray, NeedleModel], np.ndarray] = probe_starts
+    #: Whether only poses clearly different from the answer are carried on (a rival search);
+    #: False carries the cheapest wherever they are (a search for a nearby cheaper basin).
+    apart_from_answer: bool = True
 
     def __call__(
         self, x_answer: np.ndarray, rays: FitRays, terms: list, loss: str
@@ -151,7 +169,8 @@ class RivalProbe:
         for j in np.argsort(c):
             if len(keep) == n or not np.isfinite(c[j]):
                 break
-            if distinct(T[j], T_answer) and all(distinct(T[j], T[k]) for k in keep):
+            apart = distinct(T[j], T_answer) or not self.apart_from_answer
+            if apart and all(distinct(T[j], T[k]) for k in keep):
                 keep.append(int(j))
         return keep
 
