@@ -7,6 +7,8 @@ simulator is reachable from what it returns (``tests/test_context_factory.py`` w
 from __future__ import annotations
 
 from suture_bt.control import PIServo
+from suture_bt.perception.needle_localizer import NeedleLocalizer
+from suture_bt.perception.unseen_arc import phantom_tissue
 from suture_bt.runtime.views import views_of
 from suture_bt.skills.context import ArmHandle, TaskContext
 from suture_bt.skills.needle_sensor import VisionNeedleSensor
@@ -14,8 +16,18 @@ from suture_bt.skills.needle_sensor import VisionNeedleSensor
 
 def build_context(world, oracle: bool = False, localizer=None) -> TaskContext:
     """Views of the world's arms, camera and clock, a PI servo per arm run by the world at
-    200 Hz, and the vision needle sensor (or, with ``oracle``, the labelled ground-truth one)."""
+    200 Hz, and the vision needle sensor (or, with ``oracle``, the labelled ground-truth one).
+
+    The default localiser knows the task's phantom (the same model the skills plan with), so
+    only the tissue where that phantom is may hide the needle's unseen part: without it any
+    tissue-coloured pixel may, and a fit that explains a needle piece while its hidden part
+    swings over open tissue passes the exposure check (session 18: answers 10-20° off adopted
+    in a campaign with dim lighting)."""
     views = views_of(world)
+    if localizer is None and not oracle:
+        stereo = views.camera.model
+        tissue = phantom_tissue(world.task.phantom, stereo.left.T_world_cam[:3, 3])
+        localizer = NeedleLocalizer(stereo, tissue=tissue)
     arms = {}
     for name, view in views.arms.items():
         servo = PIServo(view)
