@@ -54,3 +54,19 @@ def test_trees_build_without_a_world_and_render_as_text():
         assert text.strip()
     with pytest.raises(ValueError, match="unknown tree"):
         trees.create("nope")
+
+
+def test_the_vision_localiser_knows_the_tasks_phantom(world):
+    """Only the task's phantom may hide the needle's unseen arc (the benchmark's localiser
+    knows it too): a point under the block's top is inside it, one above is not."""
+    import numpy as np
+
+    from suture_bt.geometry.phantom import TISSUE_TOP_Z
+
+    ctx = build_context(world)
+    tissue = ctx.sensor.localizer.tissue
+    assert tissue is not None
+    T = ctx.phantom.T_world_phantom
+    # 30 mm beside the ridge, which stands higher than the block.
+    points = [T[:3, :3] @ [0.03, 0.0, TISSUE_TOP_Z + dz] + T[:3, 3] for dz in (-0.005, 0.005)]
+    assert tissue(np.array(points), margin=0.001).tolist() == [True, False]
