@@ -140,11 +140,14 @@ def without_occluder_rims(
     share = np.bincount(lab[near].ravel(), minlength=n) / np.maximum(counts, 1)
     share[0] = 0.0
     share[np.argmax(np.where(np.arange(n) > 0, counts, -1))] = 0.0
-    ys, xs = np.nonzero(lab)
+    rims = np.nonzero(share >= RIM_SHARE)[0]
+    if not len(rims):
+        return view
+    # Only the rim candidates' colour is looked at: a violet one is the band, kept.
+    ys, xs = np.nonzero(np.isin(lab, rims))
     violet = violet_score(rgb[ys + y0, xs + x0]) > BAND_PIXEL_SCORE
     band_share = np.bincount(lab[ys, xs][violet], minlength=n) / np.maximum(counts, 1)
-    share[band_share >= BAND_PIECE_SHARE] = 0.0
-    rims = np.nonzero(share >= RIM_SHARE)[0]
+    rims = rims[band_share[rims] < BAND_PIECE_SHARE]
     if not len(rims):
         return view
     return replace(view, mask=view.mask & ~np.isin(lab, rims))

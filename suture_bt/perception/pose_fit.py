@@ -306,23 +306,20 @@ class PoseFitter:
         b, ok, misses = choose_answer(self._world(xf), cf, priors, self.model)
         amb = float(np.min(np.delete(cf, b)) - cf[b]) if len(cf) > 1 else float("inf")
         fit_rays = FitRays(rays, coarse, mid)
+        # Probes whose cheaper result replaces the answer (never a rival): slides, small turns.
+        small = {"n_mid": 2, "n_polish": 1}
+        nearby = []
         if self.probe_slides and hidden_end:
-            slide = RivalProbe(self.stereo, self.model, n_mid=2, n_polish=1, starts=slide_starts)
-            xs, cs = slide(xf[b], fit_rays, polish, self.final_loss)
-            keep = np.where(self._in_range(xs), cs, np.inf) < cf[b]  # as the rivals below
-            xf, cf = np.concatenate([xf, xs[keep]]), np.concatenate([cf, cs[keep]])
-            b, ok, misses = choose_answer(self._world(xf), cf, priors, self.model)
+            nearby.append(RivalProbe(self.stereo, self.model, starts=slide_starts, **small))
         if self.probe_near:
-            near_probe = RivalProbe(
-                self.stereo,
-                self.model,
-                n_mid=2,
-                n_polish=1,
-                starts=near_starts,
-                apart_from_answer=False,
+            nearby.append(
+                RivalProbe(
+                    self.stereo, self.model, starts=near_starts, apart_from_answer=False, **small
+                )
             )
-            xs, cs = near_probe(xf[b], fit_rays, polish, self.final_loss)
-            keep = np.where(self._in_range(xs), cs, np.inf) < cf[b]
+        for probe in nearby:
+            xs, cs = probe(xf[b], fit_rays, polish, self.final_loss)
+            keep = np.where(self._in_range(xs), cs, np.inf) < cf[b]  # as the rivals below
             xf, cf = np.concatenate([xf, xs[keep]]), np.concatenate([cf, cs[keep]])
             b, ok, misses = choose_answer(self._world(xf), cf, priors, self.model)
         # Rivals are the probe's poses (and the first answer, if one of them replaces it):
