@@ -5,11 +5,13 @@ oracle context, which exists only for the labelled ablation, must reach ground t
 walk is shown to find it when it is there.
 """
 
+import numpy as np
 import py_trees
 import pytest
 from honesty_helpers import reachable_sim_objects
 
 from suture_bt import trees
+from suture_bt.geometry.phantom import TISSUE_TOP_Z
 from suture_bt.runtime.context_factory import build_context
 from suture_bt.sim.scene import scene_from_dict
 from suture_bt.sim.world import World
@@ -59,10 +61,6 @@ def test_trees_build_without_a_world_and_render_as_text():
 def test_the_vision_localiser_knows_the_tasks_phantom(world):
     """Only the task's phantom may hide the needle's unseen arc (the benchmark's localiser
     knows it too): a point under the block's top is inside it, one above is not."""
-    import numpy as np
-
-    from suture_bt.geometry.phantom import TISSUE_TOP_Z
-
     ctx = build_context(world)
     tissue = ctx.sensor.localizer.tissue
     assert tissue is not None
