@@ -50,6 +50,7 @@ from suture_bt.perception.needle_localizer import MAX_ANGLE_STD_DEG, NeedleLocal
 from suture_bt.perception.needle_prior import HeldPrior, PortPrior, arc_distance
 from suture_bt.perception.needle_projection import rasterize_needle
 from suture_bt.perception.pose_fit import NeedleNotFound
+from suture_bt.perception.rival_probe import distinct
 from suture_bt.perception.unseen_arc import phantom_tissue
 from suture_bt.transforms import invert
 
@@ -297,7 +298,22 @@ def _localize_row(loc, left, right, T_true, priors, R_swap) -> dict:
         "end_exposed_mm": [1e3 * x for x in est.exposure.end_exposed],
         "seen_inside_mm": 1e3 * est.exposure.seen_inside,
         "total_exposed_mm": [1e3 * x for x in est.exposure.total_exposed],
+        "seen_mm": [1e3 * x for x in est.exposure.seen],
+        "twin_ratio": _twin_ratio(est.fit, R_swap),
     }
+
+
+def _twin_ratio(fit, R_swap) -> float | None:
+    """Cost of the cheapest final candidate clearly different from the answer (and from its
+    base ↔ tip swap, the same outline) over the answer's (None: no such candidate)."""
+    T_sw = fit.T_cam_needle.copy()
+    T_sw[:3, :3] = T_sw[:3, :3] @ R_swap
+    costs = [
+        c
+        for T, c in zip(fit.candidates, fit.candidate_costs, strict=True)
+        if np.isfinite(c) and distinct(T, fit.T_cam_needle) and distinct(T, T_sw)
+    ]
+    return float(min(costs) / max(fit.cost, 1e-12)) if costs else None
 
 
 def _keypoint_end_px(loc, est) -> list[float]:

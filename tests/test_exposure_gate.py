@@ -1,5 +1,6 @@
 """The exposure gate refuses a fitted arc whose unseen part nothing hides, saying how much
-shows over the background, and lets the needle's own pose through."""
+shows over the background, and lets the needle's own pose through; it refuses an arc too
+little of which is seen."""
 
 import pytest
 from test_needle_prior import _twin_case
@@ -29,6 +30,15 @@ def test_a_twin_over_the_background_is_refused_with_what_shows():
     assert gate(images, views, T, ()).worst == 0.0  # the needle: its hidden part is covered
     with pytest.raises(NeedleNotFound, match=r"runs \d+\.\d mm .* hidden by nothing"):
         gate(images, views, twin, ())
+
+
+def test_an_arc_seen_too_little_is_refused_with_how_much_is_seen():
+    st, T, _, images, views = _twin_scene()
+    exposure = ExposureGate(st, MODEL, ColourRule())(images, views, T, ())
+    seen = min(exposure.seen)  # the tip half is behind the jaw: about half the arc shows
+    assert 0.25 * MODEL.length < seen < 0.75 * MODEL.length
+    with pytest.raises(NeedleNotFound, match=r"seen over only \d+\.\d mm"):
+        ExposureGate(st, MODEL, ColourRule(), min_seen=seen + 1e-3)(images, views, T, ())
 
 
 def test_no_limit_means_no_refusal():

@@ -7,7 +7,12 @@ from perception_helpers import pose_errors
 from test_pose_fit import MODEL, _scene_1080p, _tip_hidden
 
 from suture_bt.perception.colour_refine import ColourRule
-from suture_bt.perception.fit_attempts import MAX_RIVAL_RATIO, FitAttempts, _same_pair
+from suture_bt.perception.fit_attempts import (
+    MAX_RIVAL_RATIO,
+    MAX_TIE_RATIO,
+    FitAttempts,
+    _same_pair,
+)
 from suture_bt.perception.pose_fit import NeedleNotFound, PoseFitter
 
 
@@ -53,5 +58,8 @@ def test_an_answer_with_a_close_rival_is_refused_with_its_reason():
     loose = dict(max_angle_std_deg=float("inf"))
     with pytest.raises(NeedleNotFound, match="another pose .* explains the outline almost as well"):
         _attempts(st, **loose)(*args)
-    fit = _attempts(st, max_rival_ratio=0.0, **loose)(*args)
-    assert fit.rival_ratio <= MAX_RIVAL_RATIO
+    # The rival ties the answer: without the rival gate the tie gate refuses it.
+    with pytest.raises(NeedleNotFound, match="explain the outline equally well"):
+        _attempts(st, max_rival_ratio=0.0, **loose)(*args)
+    fit = _attempts(st, max_rival_ratio=0.0, max_tie_ratio=0.0, **loose)(*args)
+    assert fit.rival_ratio <= MAX_RIVAL_RATIO and fit.tie_ratio <= MAX_TIE_RATIO

@@ -6,7 +6,14 @@ import pytest
 import torch
 from perception_helpers import pose_errors, stereo, task_scene
 
-from suture_bt.perception.needle_localizer import NeedleLocalizer
+from suture_bt.perception.needle_localizer import (
+    HELD_PIN_TOLERANCE,
+    MAX_ANGLE_STD_DEG,
+    MAX_ANGLE_STD_DEG_HELD,
+    MAX_ANGLE_STD_DEG_UNAIDED,
+    NeedleLocalizer,
+)
+from suture_bt.perception.needle_prior import HeldPrior, PortPrior
 from suture_bt.perception.network import DEFAULT_WEIGHTS, NeedleNet
 from suture_bt.perception.pose_fit import NeedleNotFound
 from suture_bt.transforms import invert
@@ -100,6 +107,20 @@ def test_keypoints_farther_apart_than_the_needle_can_appear_keep_only_the_strong
     assert score[0, 1] == 0.47  # the raw scores are left alone
     far_weak = np.array([[0.1, 0.9], [0.6, 0.7]])  # an untrusted keypoint is no rival
     np.testing.assert_array_equal(loc._plausible(kp, far_weak), far_weak)
+
+
+def test_without_priors_the_spread_limit_is_tighter_and_a_pinned_holder_loosens_it():
+    """Nothing but the image checks the plane of an answer given without priors; a calibrated
+    held-by prior pins a point of the arc and allows a looser spread."""
+    loc = NeedleLocalizer(stereo(1920, 1080), net=_eager_net())
+    port = PortPrior("entry 1", np.zeros(3), 0.002)
+    pinned = HeldPrior("psm2", np.zeros(3), HELD_PIN_TOLERANCE)
+    assert loc._angle_std_limit(()) == pytest.approx(MAX_ANGLE_STD_DEG_UNAIDED)
+    assert loc._angle_std_limit((port,)) == pytest.approx(MAX_ANGLE_STD_DEG)
+    assert loc._angle_std_limit((pinned,)) == pytest.approx(MAX_ANGLE_STD_DEG_HELD)
+    assert MAX_ANGLE_STD_DEG_UNAIDED < MAX_ANGLE_STD_DEG < MAX_ANGLE_STD_DEG_HELD
+    unlimited = NeedleLocalizer(stereo(1920, 1080), net=_eager_net(), max_angle_std_deg=np.inf)
+    assert unlimited._angle_std_limit(()) == np.inf
 
 
 def test_a_held_needle_30_mm_from_the_cameras_is_localised(monkeypatch):

@@ -4,7 +4,6 @@ occlusion, and fails with NeedleNotFound on an empty mask."""
 import numpy as np
 import pytest
 from perception_helpers import pose_errors, random_needle_pose, stereo
-from scipy.spatial.transform import Rotation
 
 from suture_bt.geometry import NeedleModel
 from suture_bt.perception import pose_fit
@@ -393,22 +392,6 @@ def test_a_second_search_from_the_best_poses_own_ends_finds_the_mirror_twin():
     # The caller can say no end is hidden: then no second search (and no slide).
     told = PoseFitter(st, MODEL).fit(*occ, short, alternatives=alt, hidden_end=False)
     np.testing.assert_allclose(told.T_cam_needle, first.T_cam_needle)
-
-
-def test_second_stage_starts_are_distinct_basins_before_copies():
-    """Copies of the best basin do not crowd out a clearly different, slightly worse one."""
-    st = stereo(1920, 1080)
-    rng = np.random.default_rng(3)
-    T = random_needle_pose(rng, 0.08, 0.12)
-    other = T.copy()
-    other[:3, :3] = T[:3, :3] @ Rotation.from_euler("x", 40, degrees=True).as_matrix()
-    fitter = PoseFitter(st, MODEL)
-    x = pose_to_params(np.stack([T, T, T, other]), st.left, MODEL)
-    x[1:3, :2] += 0.3  # near-copies of the best, a fraction of a pixel apart
-    cost = np.array([1.0, 1.01, 1.02, 1.5])
-    assert list(fitter._diverse(x, cost, 2)) == [0, 3]
-    assert list(fitter._diverse(x, cost, 3)) == [0, 3, 1]
-    assert list(fitter._diverse(x, np.full(4, np.inf), 2)) == [0, 1]
 
 
 @pytest.mark.parametrize("ratio, n_seeds", [(0.0, 1), (1e6, 2)])

@@ -2,7 +2,8 @@
 benchmark's line, ``rival`` picks the cheapest usable clearly different pose, and in a fit a
 clean outline leaves no close rival. The slide probe's starts slide the answer along its own
 circle, and from a pose slid off the needle it finds the needle. The near probe's small turns
-take a Task 3 start answer stopped 5° off into the needle's own basin."""
+take a Task 3 start answer stopped 5° off into the needle's own basin. A tie is measured
+apart from the answer's base ↔ tip swap, which is the same outline."""
 
 import numpy as np
 from perception_helpers import pose_errors
@@ -28,6 +29,8 @@ from suture_bt.perception.rival_probe import (
     probe_starts,
     rival,
     slide_starts,
+    swapped,
+    tie_ratio,
 )
 
 
@@ -76,6 +79,26 @@ def test_rival_is_the_cheapest_usable_clearly_different_pose():
     # pose 1 is cheaper but the same answer; pose 3 is cheaper but unusable (a prior refuses it)
     assert np.isclose(ratio, 1.1) and np.isclose(offset[1], 30.0)
     assert rival(0, poses[:2], costs[:2], usable[:2]) == (float("inf"), None)
+
+
+def test_the_swap_is_the_same_outline_with_base_and_tip_exchanged():
+    T = _pose((10.0, -20.0, 30.0), (0.01, -0.02, 0.1))
+    angles = np.linspace(MODEL.base_angle, MODEL.tip_angle, 9)
+    arc = MODEL.point_at(angles) @ T[:3, :3].T + T[:3, 3]
+    S = swapped(T, MODEL)
+    arc_swapped = MODEL.point_at(angles) @ S[:3, :3].T + S[:3, 3]
+    assert np.allclose(arc_swapped, arc[::-1], atol=1e-9)
+    assert np.isclose(pose_offset(T, S)[1], 180.0)
+
+
+def test_a_tie_ignores_the_answers_own_swap_and_unusable_poses():
+    T = _pose()
+    poses = np.stack([T, swapped(T, MODEL), _pose((0.0, 30.0, 0.0)), _pose((0.0, 60.0, 0.0))])
+    costs = np.array([1.0, 1.0, 1.004, 0.9])
+    usable = np.array([True, True, True, False])
+    # pose 1 is the answer's own outline; pose 3 is cheaper but a prior refuses it
+    assert np.isclose(tie_ratio(0, poses, costs, usable, MODEL), 1.004)
+    assert tie_ratio(0, poses[:2], costs[:2], usable[:2], MODEL) == float("inf")
 
 
 def test_a_clean_outline_leaves_no_rival_within_the_limit():

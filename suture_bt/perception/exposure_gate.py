@@ -40,6 +40,10 @@ MAX_EXPOSED_ONE_EYE = 0.006
 #: tissue (where it would be hidden) is refused (seed 6173: correct answers 0, a 180° twin of
 #: a needle in a port 5.9 mm).
 MAX_SEEN_INSIDE = 0.001
+#: A final fit whose arc either eye sees over less than this (m of arc, all seen samples
+#: together) is refused: a few pixels (the swage band beside a jaw) cannot pin six degrees
+#: of freedom, and an arc laid along an occluder's edge explains them as well as the needle.
+MIN_SEEN = 0.0035
 
 
 @dataclass
@@ -49,19 +53,21 @@ class ExposureGate:
     ``tissue`` (optional task knowledge, world points → bool: where the known phantom may hide
     a needle, :func:`~suture_bt.perception.unseen_arc.tissue_model`) lets the tissue hide only
     there; without it any tissue-coloured pixel may hide the needle. ``max_exposed`` (m of
-    arc): see :data:`MAX_EXPOSED` (inf: no check)."""
+    arc): see :data:`MAX_EXPOSED` (inf: no check); ``min_seen``: :data:`MIN_SEEN` (0: none)."""
 
     stereo: StereoCameraModel
     model: NeedleModel
     rule: ColourRule
     tissue: Callable[..., np.ndarray] | None = None
     max_exposed: float = MAX_EXPOSED
+    min_seen: float = MIN_SEEN
 
     def __call__(self, images, views, T_cam: np.ndarray, priors) -> ArcExposure:
         """The fitted arc's (``T_cam``) unseen, unhidden stretches in the two ``images`` and
         their needle ``views``; NeedleNotFound when both eyes show a stretch longer than
-        ``max_exposed`` (m) with no needle and nothing in front of it, or wire both see lies
-        deep in the tissue. ``priors``' ports (with normals) may hide the wire below them."""
+        ``max_exposed`` (m) with no needle and nothing in front of it, wire both see lies
+        deep in the tissue, or an eye sees less than ``min_seen`` (m) of the arc.
+        ``priors``' ports (with normals) may hide the wire below them."""
         ports = [(p.point, p.normal) for p in priors if getattr(p, "normal", None) is not None]
         inside, tissue_hides = self.tissue, self.tissue is None and not ports
         if ports:
@@ -84,6 +90,13 @@ class ExposureGate:
             inside_tissue=inside,
             tissue_hides=tissue_hides,
         )
+        if min(exp.seen) < self.min_seen:
+            raise NeedleNotFound(
+                f"the fitted arc is seen over only {1e3 * min(exp.seen):.1f} mm (left "
+                f"{1e3 * exp.seen[0]:.1f}, right {1e3 * exp.seen[1]:.1f}; need "
+                f"{1e3 * self.min_seen:.1f} in each eye): too little of the needle is seen "
+                "to pin its pose"
+            )
         if exp.seen_inside > MAX_SEEN_INSIDE and np.isfinite(self.max_exposed):
             raise NeedleNotFound(
                 f"the fit puts {1e3 * exp.seen_inside:.1f} mm of the wire both eyes see inside "

@@ -25,7 +25,7 @@ from suture_bt.perception.needle_ends import band_pixels
 from suture_bt.perception.needle_prior import PriorContradicted, seed_poses
 from suture_bt.perception.occlusion import anchored_ends, end_is_occluded, extended_ends
 from suture_bt.perception.pose_fit import NeedleNotFound, PoseFitResult, PoseFitter
-from suture_bt.perception.rival_probe import MAX_RIVAL_RATIO
+from suture_bt.perception.rival_probe import MAX_RIVAL_RATIO, MAX_TIE_RATIO
 
 #: A keypoint this confident anchors its end even when the other end's keypoint is weak
 #: (then the other end is sought at, and behind, the visible piece's far end).
@@ -65,8 +65,9 @@ class FitAttempts:
     """The fit stage (see the module docstring) with the localiser's cameras, model, colour
     rule and fitter; answers worse than ``max_rms_px`` RMS, explaining less than
     MIN_INLIER_FRACTION of the edge, looser than ``max_angle_std_deg`` or
-    ``max_position_std_mm``, or with a clearly different pose within ``max_rival_ratio`` of
-    their cost (:mod:`rival_probe`) are refused."""
+    ``max_position_std_mm``, with a clearly different pose within ``max_rival_ratio`` of
+    their cost (:mod:`rival_probe`), or tied with another of the fit's final poses within
+    ``max_tie_ratio`` are refused."""
 
     stereo: StereoCameraModel
     model: NeedleModel
@@ -76,6 +77,7 @@ class FitAttempts:
     max_angle_std_deg: float = 2.0
     max_rival_ratio: float = MAX_RIVAL_RATIO
     max_position_std_mm: float = MAX_POSITION_STD_MM
+    max_tie_ratio: float = MAX_TIE_RATIO
 
     def __call__(
         self, images, views, ends, depth, half_width, previous, kp, score, priors=()
@@ -189,5 +191,11 @@ class FitAttempts:
                 f"another pose {mm:.1f} mm / {deg:.0f} deg away explains the outline almost as "
                 f"well (cost {ratio:.2f}x the answer's, limit {limit:.2f}): the seen part does "
                 "not pin the pose"
+            )
+        if fit.tie_ratio <= self.max_tie_ratio:
+            raise NeedleNotFound(
+                f"two clearly different poses explain the outline equally well (cost "
+                f"{fit.tie_ratio:.4f}x the answer's, limit {self.max_tie_ratio:.2f}): the seen "
+                "part is the same arc in both and nothing seen tells them apart"
             )
         return fit

@@ -88,6 +88,13 @@ MAX_ANGLE_STD_DEG = 2.0
 #: right (held_presented 5 of 5, in a port 3 of 3; spreads up to 3.8°), while the wrong
 #: answers loose enough to matter spread 22-24°.
 MAX_ANGLE_STD_DEG_HELD = 4.0
+#: The same limit when the caller gives no prior: nothing but the image then checks the arc's
+#: plane. On the needle reports of session 18 (seeds 71715578 and 51102751) two needles in a
+#: port, seen only outside the entry, were answered 6.2° and 8.1° off with spreads 1.6° and
+#: 1.9° (and a development one, seed 2000, 7.1° off at 2.0°); over 1,559 right answers
+#: without priors (reports of sessions 15-18 and development seeds 1000, 2000, 6173) 11 spread
+#: more than 1.5°. A refusal costs the caller a second look; a wrong plane costs a throw.
+MAX_ANGLE_STD_DEG_UNAIDED = 1.5
 #: A held-by prior at most this loose (m: a calibrated holder's) pins the arc.
 HELD_PIN_TOLERANCE = 0.0015
 
@@ -126,8 +133,9 @@ class NeedleLocalizer:
         default: on the 1080p occluded benchmark it lowered success from 0.43 to 0.37, since
         tissue hides a needle in a port as an arm does); ``max_rms_px`` is the worst final
         edge residual accepted and ``max_angle_std_deg`` the loosest predicted angle spread
-        (else NeedleNotFound; ``max_angle_std_deg_held`` when a calibrated held-by prior pins
-        the arc).
+        when priors are given (else NeedleNotFound; ``max_angle_std_deg_held`` when a
+        calibrated held-by prior pins the arc; scaled down without priors, see
+        :meth:`_angle_std_limit`).
 
         ``tissue`` (optional task knowledge, world points → bool: where the known phantom may
         hide a needle, :func:`~suture_bt.perception.unseen_arc.tissue_model`) lets the tissue
@@ -344,9 +352,13 @@ class NeedleLocalizer:
         return attempts(images, views, ends, depth, half_width, previous, kp, score, priors)
 
     def _angle_std_limit(self, priors) -> float:
-        """The loosest predicted angle spread answered: wider when a held-by prior pins a
-        point of the arc to the jaw within HELD_PIN_TOLERANCE (the spread is the image's
-        alone, and the prior has already chosen among the candidates)."""
+        """The loosest predicted angle spread answered: narrower without priors
+        (``max_angle_std_deg`` scaled as MAX_ANGLE_STD_DEG_UNAIDED is to MAX_ANGLE_STD_DEG),
+        wider when a held-by prior pins a point of the arc to the jaw within
+        HELD_PIN_TOLERANCE (the spread is the image's alone, and the prior has already chosen
+        among the candidates)."""
+        if not priors:
+            return self.max_angle_std_deg * MAX_ANGLE_STD_DEG_UNAIDED / MAX_ANGLE_STD_DEG
         pinned = any(isinstance(p, HeldPrior) and p.tolerance <= HELD_PIN_TOLERANCE for p in priors)
         if not pinned:
             return self.max_angle_std_deg

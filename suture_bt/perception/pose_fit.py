@@ -41,6 +41,7 @@ from suture_bt.perception.edge_samples import (  # noqa: F401 - mask_ends re-exp
     mask_ends,
     subsample,
 )
+from suture_bt.perception.fit_result import PoseFitResult
 from suture_bt.perception.fit_solver import (  # noqa: F401 - re-exported
     FD_STEPS,
     LOSSES,
@@ -48,6 +49,7 @@ from suture_bt.perception.fit_solver import (  # noqa: F401 - re-exported
     pose_uncertainty,
     robust_cost,
 )
+from suture_bt.perception.fit_starts import DISTINCT, diverse, rot_angle, start_params
 from suture_bt.perception.fit_terms import (  # noqa: F401 - re-exported
     END_PRIOR_SHARE,
     EndPriorTerm,
@@ -58,7 +60,6 @@ from suture_bt.perception.needle_prior import NeedlePrior, choose_answer, with_c
 from suture_bt.perception.needle_projection import (
     end_pixels,
     params_to_pose,
-    phi_from_base_depth,
     pose_to_params,
 )
 from suture_bt.perception.prior_term import PriorTerm
@@ -69,49 +70,12 @@ from suture_bt.perception.rival_probe import (
     near_starts,
     rival,
     slide_starts,
+    tie_ratio,
 )
 
 #: A clearly different second-stage pose costing at most this much more than the best also
 #: seeds the second search (1.3 gave the same answers on the benchmarks for 10 ms more).
 RESEED_RIVAL_RATIO = 1.1
-#: Rotation (rad) beyond which two fitted poses count as different solutions.
-DISTINCT = np.deg2rad(10.0)
-
-
-@dataclass(frozen=True)
-class PoseFitResult:
-    """A fitted needle pose with its evidence.
-
-    ``rms_px`` is the RMS edge residual of inliers; ``inlier_fraction`` the share of edge points
-    within 1.5 px of the model outline; ``ambiguity`` the cost of the best clearly different
-    solution minus the chosen one's (small: tilt-mirror not resolved); ``angle_std_deg`` and
-    ``position_std_mm`` how loosely the seen outline pins the pose (:func:`pose_uncertainty`).
-    """
-
-    T_cam_needle: np.ndarray
-    T_world_needle: np.ndarray
-    params: np.ndarray
-    cost: float
-    rms_px: float
-    inlier_fraction: float
-    n_edge_points: tuple[int, int]
-    ambiguity: float
-    candidates: list = field(default_factory=list, repr=False)
-    #: The polished candidates' costs (inf: outside the working range), as ``candidates``.
-    candidate_costs: tuple[float, ...] = ()
-    angle_std_deg: float = float("nan")
-    position_std_mm: float = float("nan")
-    #: The chosen pose's miss of each prior given, over its tolerance (≤ 1; empty: none).
-    prior_misses: tuple[float, ...] = ()
-    #: Cost of the cheapest clearly different pose (:mod:`rival_probe`) over the answer's
-    #: (inf: none found), and its offset from the answer (mm, deg).
-    rival_ratio: float = float("inf")
-    rival_offset: tuple[float, float] | None = None
-
-
-def _rot_angle(Ra: np.ndarray, Rb: np.ndarray) -> float:
-    c = (np.trace(Ra.T @ Rb) - 1.0) / 2.0
-    return float(np.arccos(np.clip(c, -1.0, 1.0)))
 
 
 @dataclass
@@ -288,7 +252,7 @@ class PoseFitter:
         for j, k in enumerate(order[1:], 1):
             if len(finals) == self.n_final or not np.isfinite(c[k]):
                 break
-            if all(_rot_angle(T_mid[i, :3, :3], T_mid[j, :3, :3]) > DISTINCT for i in kept):
+            if all(rot_angle(T_mid[i, :3, :3], T_mid[j, :3, :3]) > DISTINCT for i in kept):
                 finals.append(k)
                 kept.append(j)
         if priors:
@@ -336,6 +300,7 @@ class PoseFitter:
             b, ok, misses = choose_answer(self._world(xf), cf, priors, self.model)
         poses = params_to_pose(xf, cam, self.model)
         rival_ratio, rival_offset = rival(b, poses, cf, ok & near)
+        tie = tie_ratio(b, poses, cf, ok, self.model)
         T = poses[b]
         r, _ = residuals(T[None], rays, self.model)
         r = r[0]
@@ -360,6 +325,7 @@ class PoseFitter:
             prior_misses=() if misses is None else tuple(float(m) for m in misses[b]),
             rival_ratio=rival_ratio,
             rival_offset=rival_offset,
+            tie_ratio=tie,
         )
 
     def _world(self, x: np.ndarray) -> np.ndarray:
@@ -368,26 +334,8 @@ class PoseFitter:
         return cam.T_world_cam[None] @ params_to_pose(x, cam, self.model)
 
     def _diverse(self, x: np.ndarray, cost: np.ndarray, n: int) -> np.ndarray:
-        """Indices of n low-cost rows, clearly different solutions first (> DISTINCT apart or
-        with the centre > a radius apart): many starts fall into one basin, and copies of it
-        would crowd out the next-best basin (often the right one when an end is hidden)."""
-        order = [int(i) for i in np.argsort(cost) if np.isfinite(cost[i])]
-        if not order:
-            return np.argsort(cost)[:n]
-        T = params_to_pose(x[order], self.stereo.left, self.model)
-        picked: list[int] = []
-        for j in range(len(order)):
-            if len(picked) == n:
-                break
-            if all(
-                _rot_angle(T[j, :3, :3], T[k, :3, :3]) > DISTINCT
-                or np.linalg.norm(T[j, :3, 3] - T[k, :3, 3]) > self.model.radius
-                for k in picked
-            ):
-                picked.append(j)
-        rest = [j for j in range(len(order)) if j not in picked]
-        picked += rest[: n - len(picked)]
-        return np.array([order[j] for j in picked], int)
+        """:func:`~.fit_starts.diverse` with this fitter's camera and model."""
+        return diverse(x, cost, n, self.stereo.left, self.model)
 
     def _in_range(self, x: np.ndarray) -> np.ndarray:
         """Which parameter rows put the arc centre within ``depth_range`` of the camera."""
@@ -395,28 +343,5 @@ class PoseFitter:
         return (z >= self.depth_range[0]) & (z <= self.depth_range[1])
 
     def _starts(self, ub: np.ndarray, ut: np.ndarray, depth_hint: float | None) -> np.ndarray:
-        """Start parameters over depths × both chord roots × psi."""
-        if depth_hint is not None and np.isfinite(depth_hint) and depth_hint > 0:
-            depths = depth_hint * np.array([0.8, 0.9, 1.0, 1.1, 1.25])
-        else:
-            depths = np.geomspace(0.05, 0.3, 12)
-        phis = phi_from_base_depth(
-            np.broadcast_to(ub, (len(depths), 2)),
-            np.broadcast_to(ut, (len(depths), 2)),
-            depths,
-            self.stereo.left,
-            self.model,
-        ).ravel()
-        phis = np.unique(np.round(phis, 6))
-        psis = np.linspace(-np.pi, np.pi, self.n_psi, endpoint=False) + np.pi / self.n_psi
-        P, S = np.meshgrid(phis, psis, indexing="ij")
-        n = P.size
-        return np.concatenate(
-            [
-                np.broadcast_to(ub, (n, 2)),
-                np.broadcast_to(ut, (n, 2)),
-                P.reshape(-1, 1),
-                S.reshape(-1, 1),
-            ],
-            1,
-        )
+        """:func:`~.fit_starts.start_params` with this fitter's camera, model and psi count."""
+        return start_params(ub, ut, depth_hint, self.stereo.left, self.model, self.n_psi)

@@ -63,6 +63,15 @@ DISTINCT_MM, DISTINCT_DEG = 2.0, 5.0
 #: and without priors; right / wrong / refused): no gate 473 / 7 / 80, 1.1 464 / 3 / 93,
 #: 1.2 449 / 0 / 111, 1.3 419 / 0 / 141 (without the probe: 470 / 8 / 82).
 MAX_RIVAL_RATIO = 1.2
+#: Any candidate of the fit (a final pose, a probe's result) this close in cost to the answer
+#: and clearly different from it (and from its base ↔ tip swap, the same outline) is a tie
+#: the image cannot break: the answer is refused, though slides and the other finals are not
+#: rivals at MAX_RIVAL_RATIO. Found on session 18's report seed 51102751 (`occluded` #6): a
+#: nearly edge-on needle with both ends behind occluders; the slide probe turned the right
+#: answer into a pose 151° off (the same seen arc, turned end for end) at 1.0000003× its
+#: cost. On development seed 6173 (40 scenes per set, with and without priors) every right
+#: answer's cheapest such candidate cost at least 1.037× its own.
+MAX_TIE_RATIO = 1.01
 
 
 def probe_starts(T: np.ndarray, model: NeedleModel) -> np.ndarray:
@@ -119,6 +128,34 @@ def distinct(Ta: np.ndarray, Tb: np.ndarray) -> bool:
     """Whether two poses are different answers (see DISTINCT_MM, DISTINCT_DEG)."""
     mm, deg = pose_offset(Ta, Tb)
     return mm > DISTINCT_MM or deg > DISTINCT_DEG
+
+
+def swapped(T: np.ndarray, model: NeedleModel) -> np.ndarray:
+    """``T`` turned 180° about the arc's bisector: the same outline with base and tip
+    exchanged (told apart later, by the swage band), not a different answer."""
+    mid = 0.5 * (model.base_angle + model.tip_angle)
+    out = np.array(T, dtype=float)
+    turn = Rotation.from_rotvec(np.pi * np.array([np.cos(mid), np.sin(mid), 0.0])).as_matrix()
+    out[:3, :3] = out[:3, :3] @ turn
+    return out
+
+
+def tie_ratio(
+    b: int, poses: np.ndarray, costs: np.ndarray, usable: np.ndarray, model: NeedleModel
+) -> float:
+    """The cheapest usable pose clearly different from pose ``b`` and from its base ↔ tip
+    swap, its cost over ``b``'s (inf: none; see MAX_TIE_RATIO)."""
+    T_swap = swapped(poses[b], model)
+    best = min(
+        (
+            float(costs[j])
+            for j in range(len(poses))
+            if j != b and usable[j] and np.isfinite(costs[j])
+            if distinct(poses[j], poses[b]) and distinct(poses[j], T_swap)
+        ),
+        default=float("inf"),
+    )
+    return best / costs[b] if costs[b] > 0.0 else (1.0 if best <= 0.0 else float("inf"))
 
 
 @dataclass(frozen=True)

@@ -62,6 +62,8 @@ class ArcExposure:
     seen_inside: float = 0.0
     #: All exposed samples of each eye together (m of arc), runs or not.
     total_exposed: tuple[float, float] = (0.0, 0.0)
+    #: All seen samples of each eye together (m of arc): how much of the arc the image shows.
+    seen: tuple[float, float] = (0.0, 0.0)
 
     @property
     def worst(self) -> float:
@@ -114,7 +116,7 @@ def arc_exposure(
         else np.asarray(inside_tissue(world, margin=DEEP))
     )
     step = model.radius * (angles[1] - angles[0])
-    classes, runs, ends, totals = [], [], [], []
+    classes, runs, ends, totals, seen = [], [], [], [], []
     for img, view, cam in zip(images, views, (stereo.left, stereo.right), strict=True):
         uv = cam.project(world)
         H, W = img.shape[:2]
@@ -164,6 +166,7 @@ def arc_exposure(
         runs.append(_longest_run(cls == EXPOSED) * step)
         ex = cls == EXPOSED
         totals.append(float(ex.sum() * step))
+        seen.append(float((cls == SEEN).sum() * step))
         ends.append(max(_leading(ex), _leading(ex[::-1])) * step)
     seen_deep = (classes[0] == SEEN) & (classes[1] == SEEN) & deep
     return ArcExposure(
@@ -172,6 +175,7 @@ def arc_exposure(
         (ends[0], ends[1]),
         float(seen_deep.sum() * step),
         (totals[0], totals[1]),
+        (seen[0], seen[1]),
     )
 
 
