@@ -153,7 +153,9 @@ def test_grey_where_the_wire_goes_into_the_tissue_does_not_say_tip():
     tip. That grey used to vote "tip here" and the answer was the needle with base and tip
     swapped (180 deg off); now it is the needle or a refusal."""
     stereo_model, left, right, T, priors, tissue = task_scene("in_port", 15)
-    loc = NeedleLocalizer(stereo_model, tissue=tissue)
+    # The exposure gate off: since session 19 (1 mm) it refuses this fit before the base-or-tip
+    # choice, which is what is tested here.
+    loc = NeedleLocalizer(stereo_model, tissue=tissue, max_exposed=float("inf"))
     try:
         est = loc.localize(left, right)
     except NeedleNotFound as exc:

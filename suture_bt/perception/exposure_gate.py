@@ -32,7 +32,12 @@ from suture_bt.perception.unseen_arc import ArcExposure, arc_exposure, below_por
 #: off). With the gate off, none of the 1339 right answers of seeds 1000, 2000 (60 scenes per
 #: set, every set) and 6173 (40) exposed 0.3-4.5 mm in both eyes (two exposed 4.5 and 6.3 mm:
 #: refused at either limit).
-MAX_EXPOSED = 0.002
+#: Lowered to 1 mm in session 19 for an edge-on held needle 31 mm away whose upper half the
+#: mask missed beside the jaw (report seed 63637987, `held_start` #8 without priors, 180° off:
+#: the fit ran its arc 1.7 mm past the mask's end over the tissue in both eyes). Over 1,330
+#: right answers (development seeds 6173 and 1000 and that report's two seeds, 40 scenes per
+#: set) the most exposed in both eyes was 0.35 mm (one centre-line sample), all others 0.
+MAX_EXPOSED = 0.001
 #: The same in either eye alone (a twin seen past the border or a jaw by the other eye); the
 #: gate scales it with its ``max_exposed`` (inf turns both off).
 MAX_EXPOSED_ONE_EYE = 0.006
