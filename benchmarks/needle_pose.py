@@ -23,7 +23,9 @@ call per stereo frame, refusals included.
 
 The localiser is given the task's known phantom as its tissue model (``unseen_arc.phantom_tissue``:
 the block's top and footprint, the ridge under the port pairs), so the tissue hides the needle
-only where it can (``--max-exposed-mm inf`` turns the unseen-part check off).
+only where it can (``--max-exposed-mm inf`` turns the unseen-part check off; the minimum of
+arc seen in each eye, ``exposure_gate.MIN_SEEN``, stays). Each answer's row records the arc
+each eye sees (``seen_mm``) and how close the fit came to a tie (``twin_ratio``).
 
     python benchmarks/needle_pose.py [--json PATH] [--n 200] [--resolution 1920x1080]
         [--prior none|held|port|task|both] [--set SET ...]

@@ -66,8 +66,8 @@ class FitAttempts:
     rule and fitter; answers worse than ``max_rms_px`` RMS, explaining less than
     MIN_INLIER_FRACTION of the edge, looser than ``max_angle_std_deg`` or
     ``max_position_std_mm``, with a clearly different pose within ``max_rival_ratio`` of
-    their cost (:mod:`rival_probe`), or tied with another of the fit's final poses within
-    ``max_tie_ratio`` are refused."""
+    their cost (:mod:`rival_probe`), or tied within ``max_tie_ratio`` with any other clearly
+    different candidate of the fit (a final pose or a probe's) are refused."""
 
     stereo: StereoCameraModel
     model: NeedleModel
