@@ -16,4 +16,9 @@ __version__ = "0.1.0"
 # busy processes 403 / 904 by default, 151 / 218 with this (sleeping at once, PASSIVE: the same
 # under load, 84 / 101 idle). Set before torch or numba load their OpenMP runtime, so it only
 # takes effect when suture_bt is imported first; a value the user set is kept.
-os.environ.setdefault("GOMP_SPINCOUNT", "1000")
+# Session 19: 1000 made the pose fit's compiled kernel, which opens a parallel region per
+# Levenberg-Marquardt step, wake its second thread from sleep each time. Development task
+# frames (seed 6173, held_start, 10 calls), fit ms idle / whole call mean and p95 beside two
+# busy processes: 1000: 74 / 213, 270; 3000: 51 / 218, 236; 10000: 47 / 228, 263; 30000: 43 /
+# 337, 494; 300000 (GNU's default): 42 / 532, 1596.
+os.environ.setdefault("GOMP_SPINCOUNT", "10000")

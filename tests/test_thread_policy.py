@@ -17,7 +17,7 @@ def _policy(env: dict) -> str:
 
 def test_idle_openmp_threads_spin_briefly_by_default():
     env = {k: v for k, v in os.environ.items() if k != "GOMP_SPINCOUNT"}
-    assert _policy(env) == "1000"
+    assert _policy(env) == "10000"
 
 
 def test_a_spin_count_the_user_set_is_kept():
