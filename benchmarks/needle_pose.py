@@ -25,7 +25,8 @@ The localiser is given the task's known phantom as its tissue model (``unseen_ar
 the block's top and footprint, the ridge under the port pairs), so the tissue hides the needle
 only where it can (``--max-exposed-mm inf`` turns the unseen-part check off; the minimum of
 arc seen in each eye, ``exposure_gate.MIN_SEEN``, stays). Each answer's row records the arc
-each eye sees (``seen_mm``) and how close the fit came to a tie (``twin_ratio``).
+each eye sees (``seen_mm``) and how close the fit came to a tie (``tie_ratio``,
+``PoseFitResult.tie_ratio``; session 19's report files call an earlier form ``twin_ratio``).
 
     python benchmarks/needle_pose.py [--json PATH] [--n 200] [--resolution 1920x1080]
         [--prior none|held|port|task|both] [--set SET ...]
@@ -52,7 +53,6 @@ from suture_bt.perception.needle_localizer import MAX_ANGLE_STD_DEG, NeedleLocal
 from suture_bt.perception.needle_prior import HeldPrior, PortPrior, arc_distance
 from suture_bt.perception.needle_projection import rasterize_needle
 from suture_bt.perception.pose_fit import NeedleNotFound
-from suture_bt.perception.rival_probe import distinct
 from suture_bt.perception.unseen_arc import phantom_tissue
 from suture_bt.transforms import invert
 
@@ -301,21 +301,8 @@ def _localize_row(loc, left, right, T_true, priors, R_swap) -> dict:
         "seen_inside_mm": 1e3 * est.exposure.seen_inside,
         "total_exposed_mm": [1e3 * x for x in est.exposure.total_exposed],
         "seen_mm": [1e3 * x for x in est.exposure.seen],
-        "twin_ratio": _twin_ratio(est.fit, R_swap),
+        "tie_ratio": est.fit.tie_ratio if np.isfinite(est.fit.tie_ratio) else None,
     }
-
-
-def _twin_ratio(fit, R_swap) -> float | None:
-    """Cost of the cheapest final candidate clearly different from the answer (and from its
-    base ↔ tip swap, the same outline) over the answer's (None: no such candidate)."""
-    T_sw = fit.T_cam_needle.copy()
-    T_sw[:3, :3] = T_sw[:3, :3] @ R_swap
-    costs = [
-        c
-        for T, c in zip(fit.candidates, fit.candidate_costs, strict=True)
-        if np.isfinite(c) and distinct(T, fit.T_cam_needle) and distinct(T, T_sw)
-    ]
-    return float(min(costs) / max(fit.cost, 1e-12)) if costs else None
 
 
 def _keypoint_end_px(loc, est) -> list[float]:

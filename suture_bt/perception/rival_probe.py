@@ -93,28 +93,30 @@ def probe_starts(T: np.ndarray, model: NeedleModel) -> np.ndarray:
     return out
 
 
+def _turned_about_centre(T: np.ndarray, R: np.ndarray) -> np.ndarray:
+    """Poses (K, 4, 4) of ``T`` turned by the rotations R (K, 3, 3, left-camera frame) about
+    its arc centre."""
+    out = np.zeros((len(R), 4, 4))
+    out[:, :3, :3] = R @ T[:3, :3]
+    out[:, :3, 3] = T[:3, 3]
+    out[:, 3, 3] = 1.0
+    return out
+
+
 def near_starts(T: np.ndarray, model: NeedleModel) -> np.ndarray:
     """Poses (K, 4, 4, left camera) turned from ``T`` by NEAR_ANGLES_DEG about the camera's x
     and y axes and the needle's x and y axes, through the arc centre."""
     axes = [np.array([1.0, 0.0, 0.0]), np.array([0.0, 1.0, 0.0]), T[:3, 0], T[:3, 1]]
     angles = np.deg2rad(NEAR_ANGLES_DEG)
     R = Rotation.from_rotvec(np.array([a * ax for ax in axes for a in angles])).as_matrix()
-    out = np.zeros((len(R), 4, 4))
-    out[:, :3, :3] = R @ T[:3, :3]
-    out[:, :3, 3] = T[:3, 3]
-    out[:, 3, 3] = 1.0
-    return out
+    return _turned_about_centre(T, R)
 
 
 def slide_starts(T: np.ndarray, model: NeedleModel) -> np.ndarray:
     """Poses (K, 4, 4, left camera) slid from ``T`` along its own circle by SLIDE_ANGLES_DEG
     (turned about the needle's z axis through the arc centre)."""
     R = Rotation.from_rotvec(np.outer(np.deg2rad(SLIDE_ANGLES_DEG), T[:3, 2])).as_matrix()
-    out = np.zeros((len(R), 4, 4))
-    out[:, :3, :3] = R @ T[:3, :3]
-    out[:, :3, 3] = T[:3, 3]
-    out[:, 3, 3] = 1.0
-    return out
+    return _turned_about_centre(T, R)
 
 
 def pose_offset(Ta: np.ndarray, Tb: np.ndarray) -> tuple[float, float]:
