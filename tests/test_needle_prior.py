@@ -4,20 +4,19 @@ mirror twins, and a prior the image contradicts is a refusal naming it, never an
 import numpy as np
 import pytest
 from perception_helpers import pose_errors
-from test_pose_fit import MODEL, _scene_1080p, _tip_hidden
+from test_pose_fit import MODEL, _scene_1080p, _tip_disc_hidden, _tip_hidden
 
+from suture_bt.perception.needle_ends import swap_rotation
 from suture_bt.perception.needle_prior import (
-    SEED_PLACES,
-    SEED_TURNS,
     AcrossJawsPrior,
     HeldPrior,
     PortPrior,
     PredictedPosePrior,
     PriorContradicted,
     arc_distance,
+    check_held_place,
     check_orientation,
     plane_crossings,
-    seed_poses,
 )
 from suture_bt.perception.pose_fit import NeedleNotFound, PoseFitter
 from suture_bt.transforms import make_transform
@@ -185,7 +184,7 @@ def test_rendered_held_needle_with_its_holders_prior_and_a_contradicting_one():
 
 
 def test_across_jaws_prior_is_signed_once_the_ends_are_known_and_not_before():
-    from suture_bt.perception.needle_prior import AcrossJawsPrior, check_across_jaws
+    from suture_bt.perception.needle_prior import check_across_jaws
 
     T = make_transform(np.eye(3), (0.0, 0.0, 0.1))  # needle z = world z
     prior = AcrossJawsPrior("psm2", np.array([0.0, 0.0, 2.0]), tolerance_deg=20.0)
@@ -206,7 +205,6 @@ def test_across_jaws_prior_is_signed_once_the_ends_are_known_and_not_before():
 
 
 def test_across_jaws_prior_turns_the_mirror_twin_into_the_right_answer():
-    from suture_bt.perception.needle_prior import AcrossJawsPrior
 
     st, T, occ, short, kw = _twin_case()
     Tw = _world(st, T)
@@ -226,7 +224,6 @@ def test_across_jaws_prior_turns_the_mirror_twin_into_the_right_answer():
 
 
 def test_sensor_adds_the_across_jaws_prior_when_given_its_tolerance():
-    from suture_bt.perception.needle_prior import AcrossJawsPrior
     from suture_bt.skills.needle_sensor import VisionNeedleSensor
 
     tip = make_transform(np.eye(3), (0.01, 0.05, 0.08))
@@ -260,18 +257,44 @@ def test_port_prior_with_a_normal_asks_the_wire_to_cross_the_port_plane():
     assert PortPrior("exit1", tip, tolerance=0.003).miss(T, MODEL) < 1e-6  # no normal: as before
 
 
-def test_seed_poses_pass_the_pinch_point_with_the_held_face_and_nearest_the_port():
-    pinch = np.array([0.01, 0.02, 0.1])
-    face = np.array([0.3, 0.2, -0.9])
-    held = HeldPrior("psm1", pinch, 0.001)
-    jaws = AcrossJawsPrior("psm1", face, 30.0)
-    seeds = seed_poses([held, jaws], MODEL)
-    assert len(seeds) == SEED_TURNS * SEED_PLACES
-    assert max(held.miss(T, MODEL) for T in seeds) < 1e-9
-    assert max(jaws.angle_deg(T) for T in seeds) < 1e-6
-    assert len(seed_poses([held], MODEL)) == 0  # the face is needed to pin the plane
-    port_at = _arc_point(seeds[7], MODEL.tip_angle + 0.3)
-    port = PortPrior("entry1", port_at, 0.003)
-    near = seed_poses([held, jaws, port], MODEL)
-    assert len(near) == 4 * SEED_PLACES
-    assert min(port.miss(T, MODEL) for T in near) < 0.5
+def test_a_held_place_measures_the_slide_along_the_arc_modulo_the_swap():
+    T = make_transform(np.eye(3), (0.01, 0.02, 0.1))
+    a = MODEL.tip_angle + 0.4
+    pinch = _arc_point(T, a)
+    held = HeldPrior("psm1", pinch, 0.001, arc_angle=a, arc_tolerance=0.0005)
+    assert held.miss(T, MODEL) < 1e-6
+    slid = _arc_point(T, a + 0.1)  # the same circle, the pinch 1.02 mm further along
+    assert HeldPrior("psm1", slid, 0.001).miss(T, MODEL) < 1e-6  # the point alone: on it
+    far = HeldPrior("psm1", slid, 0.001, arc_angle=a, arc_tolerance=0.0005)
+    assert far.slide(T, MODEL) == pytest.approx(0.1 * MODEL.radius)
+    assert far.miss(T, MODEL) == pytest.approx(0.1 * MODEL.radius / 0.0005)
+    assert "where its grasp holds the needle" in far.refusal(far.miss(T, MODEL))
+    swapped = T.copy()
+    swapped[:3, :3] = swap_rotation(MODEL)  # base and tip exchanged: same outline
+    assert held.miss(swapped, MODEL) < 1e-6  # modulo the swap
+    assert held.slide(swapped, MODEL, signed=True) > 0.005
+    check_held_place([held], T, MODEL, "colour")
+    with pytest.raises(PriorContradicted, match="swapped ends"):
+        check_held_place([held], swapped, MODEL, "colour")
+    check_held_place([HeldPrior("psm1", pinch, 0.001)], swapped, MODEL, "colour")  # no place
+
+
+@pytest.mark.parametrize("seed", [5, 8])
+def test_a_held_place_pins_a_needle_whose_ends_are_both_hidden(seed):
+    """Both ends behind occluders: the seen middle leaves the needle free to slide along its
+    circle, and the fit, held-by prior or not, answers it 33-38 deg round; where the grasp holds
+    the needle brings it back (within 1 deg)."""
+    st, T, left, right, ends = _scene_1080p(seed, 0.0)
+    both = [
+        _tip_disc_hidden(_tip_disc_hidden(v, ends, 0.3), ends[::-1], 0.3) for v in (left, right)
+    ]
+    a = MODEL.tip_angle + 0.6
+    pinch = _arc_point(_world(st, T), a)
+    point_only = HeldPrior("psm1", pinch, 0.001)
+    placed = HeldPrior("psm1", pinch, 0.001, arc_angle=a, arc_tolerance=0.0005)
+    fit = PoseFitter(st, MODEL).fit(*both, None, priors=[point_only], hidden_end=True)
+    assert pose_errors(fit.T_cam_needle, T)[1] > 30.0
+    fit = PoseFitter(st, MODEL).fit(*both, None, priors=[placed], hidden_end=True)
+    pos, ang = pose_errors(fit.T_cam_needle, T)
+    assert pos < 0.3 and ang < 1.0
+    assert placed.slide(_world(st, fit.T_cam_needle), MODEL) < 0.0002

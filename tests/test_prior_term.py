@@ -2,13 +2,16 @@
 fit's predicted spread."""
 
 import numpy as np
+import pytest
 from perception_helpers import random_needle_pose, stereo
+from scipy.spatial.transform import Rotation
 from test_pose_fit import _scene_1080p, _tip_disc_hidden
 
 from suture_bt.geometry import NeedleModel
 from suture_bt.perception.edge_residuals import edge_rays
 from suture_bt.perception.fit_solver import FD_STEPS, _pose_derivatives, pose_uncertainty
 from suture_bt.perception.mask_view import edge_points
+from suture_bt.perception.needle_ends import swap_rotation
 from suture_bt.perception.needle_prior import (
     HeldPrior,
     PortPrior,
@@ -17,7 +20,13 @@ from suture_bt.perception.needle_prior import (
     arc_offsets,
 )
 from suture_bt.perception.needle_projection import params_to_pose, pose_to_params
-from suture_bt.perception.prior_term import PRIOR_PX, PriorTerm, prior_information
+from suture_bt.perception.prior_term import (
+    PRIOR_PX,
+    HeldPlaceTerm,
+    PriorTerm,
+    prior_information,
+)
+from suture_bt.transforms import make_transform
 
 MODEL = NeedleModel()
 
@@ -109,3 +118,37 @@ def test_prior_information_is_the_misses_jacobian_outer_product():
     assert np.all(np.linalg.eigvalsh(info) > -1e-9)
     # A point prior pins at most the two directions across the arc: rank ≤ 2.
     assert np.linalg.matrix_rank(info, tol=1e-6 * np.abs(info).max()) <= 2
+
+
+def test_a_held_place_adds_the_slide_along_the_circle_a_point_alone_leaves_free():
+    """The pinch point on the arc says nothing of where along its circle the needle sits;
+    the held place does: its signed slide in tolerances, modulo the base ↔ tip swap, and one
+    more direction of information. The search's own term carries the slides alone."""
+    st = stereo(640, 480)
+    T = random_needle_pose(np.random.default_rng(5), 0.06, 0.1)
+    T_world = st.left.T_world_cam @ T
+    a = MODEL.tip_angle + 0.5
+    pinch = _world(T_world, MODEL.point_at(a))
+    placed = HeldPrior("psm1", pinch, 0.001, arc_angle=a, arc_tolerance=0.0005)
+    term = PriorTerm([placed], st.left.T_cam_world, MODEL)
+    assert len(term.column_weights(100)) == 4 and term.scaled(T[None]).shape == (1, 4)
+    assert abs(term.slides(T[None])[0, 0]) < 1e-9
+    turn = make_transform(Rotation.from_rotvec([0.0, 0.0, 0.05]).as_matrix(), np.zeros(3))
+    slid = T @ turn
+    assert term.slides(slid[None])[0, 0] == pytest.approx(-0.05 * MODEL.radius / 0.0005)
+    swapped = T.copy()
+    swapped[:3, :3] = T[:3, :3] @ swap_rotation(MODEL)
+    assert abs(term.slides(swapped[None])[0, 0]) < 1e-9
+    x = pose_to_params(T[None], st.left, MODEL)
+    T0 = params_to_pose(x, st.left, MODEL)
+    T6, _ = _pose_derivatives(x, T0, st.left, MODEL)
+    point_only = PriorTerm([HeldPrior("psm1", pinch, 0.001)], st.left.T_cam_world, MODEL)
+    rank = [
+        np.linalg.matrix_rank(prior_information(t, T0[0], T6[0], FD_STEPS), tol=1e-3)
+        for t in (point_only, term)
+    ]
+    assert rank[1] == rank[0] + 1
+    search = HeldPlaceTerm([placed], st.left.T_cam_world, MODEL)
+    assert not search.polish and len(search.column_weights(100)) == 1
+    np.testing.assert_allclose(search(slid[None]), PRIOR_PX * term.slides(slid[None]))
+    assert not HeldPlaceTerm([HeldPrior("psm1", pinch, 0.001)], st.left.T_cam_world, MODEL)

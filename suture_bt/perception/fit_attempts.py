@@ -5,7 +5,7 @@ rival pose of near-equal cost).
 Hypotheses: the keypoints (with their stereo depth), ends that touch an occluder pushed on
 behind it (:mod:`occlusion`), a confident keypoint with the visible piece's far end, the
 mask's ends measured along it (:mod:`geodesic_ends`); confident keypoints and the swage band
-pull the search; the caller's priors seed it (:func:`~.needle_prior.seed_poses`) and choose
+pull the search; the caller's priors seed it (:func:`~.prior_seeds.seed_poses`) and choose
 among its candidates (:mod:`pose_fit`).
 """
 
@@ -22,9 +22,10 @@ from suture_bt.perception.colour_refine import ColourRule
 from suture_bt.perception.edge_samples import mask_ends
 from suture_bt.perception.geodesic_ends import geodesic_ends
 from suture_bt.perception.needle_ends import band_pixels
-from suture_bt.perception.needle_prior import PriorContradicted, seed_poses
+from suture_bt.perception.needle_prior import PriorContradicted
 from suture_bt.perception.occlusion import anchored_ends, end_is_occluded, extended_ends
 from suture_bt.perception.pose_fit import NeedleNotFound, PoseFitResult, PoseFitter
+from suture_bt.perception.prior_seeds import seed_poses
 from suture_bt.perception.rival_probe import MAX_RIVAL_RATIO, MAX_TIE_RATIO
 
 #: A keypoint this confident anchors its end even when the other end's keypoint is weak

@@ -54,6 +54,7 @@ from suture_bt.perception.needle_prior import (
     NeedlePrior,
     PredictedPosePrior,
     check_across_jaws,
+    check_held_place,
     check_orientation,
 )
 from suture_bt.perception.network import (
@@ -283,6 +284,7 @@ class NeedleLocalizer:
         )
         check_orientation(predicted, self.stereo.left.T_world_cam @ T_cam, decided_by)
         check_across_jaws(jaws, self.stereo.left.T_world_cam @ T_cam, decided_by)
+        check_held_place(priors, self.stereo.left.T_world_cam @ T_cam, self.model, decided_by)
         t4 = time.perf_counter()
         return NeedleEstimate(
             T_cam_needle=T_cam,

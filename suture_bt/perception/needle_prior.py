@@ -5,7 +5,8 @@ outline almost as well as the needle does (DESIGN.md §5). What the task knows b
 
 - :class:`HeldPrior`: the needle is held by an arm, so its wire passes between that arm's
   jaws at the pinch point (from the arm's measured tip pose: a few mm off while the arm is
-  uncalibrated, sub-mm once its joint offset is compensated);
+  uncalibrated, sub-mm once its joint offset is compensated), and, when the caller's grasp
+  knows it, at a known place along the needle (what pins a needle whose ends are both hidden);
 - :class:`PortPrior`: the needle is in a port, so its arc passes through the port's known
   position;
 - :class:`PredictedPosePrior`: the pose the holding arm's motion predicts;
@@ -68,22 +69,69 @@ def _swap_rotation(model: NeedleModel) -> np.ndarray:
 
 @dataclass(frozen=True)
 class HeldPrior:
-    """Held by ``arm``: the wire passes within ``tolerance`` (m) of ``pinch_point`` (world)."""
+    """Held by ``arm``: the wire passes within ``tolerance`` (m) of ``pinch_point`` (world).
+
+    ``arc_angle`` (optional, rad in the needle frame: where along the needle the jaw holds
+    it, as the caller's own grasp knows it) adds that the pinch point sits at that place of
+    the arc within ``arc_tolerance`` (m along the arc). A needle with both ends hidden (one in
+    the tissue, one in the jaw) slides along its own circle unseen; this pins the slide.
+    Within the fit, whose candidates may have base and tip swapped, the place is taken modulo
+    the swap; once the ends are told apart it is signed (:func:`check_held_place`)."""
 
     arm: str
     pinch_point: np.ndarray
     tolerance: float = 0.003
+    arc_angle: float | None = None
+    arc_tolerance: float = 0.0005
+
+    def slide(self, T_world_needle: np.ndarray, model: NeedleModel, signed: bool = False) -> float:
+        """Arc length (m) from the held place to where the pinch point sits on this pose's
+        circle (0 without a held place; modulo the base ↔ tip swap unless ``signed``)."""
+        if self.arc_angle is None:
+            return 0.0
+        theta = pinch_angle(self.pinch_point, T_world_needle)
+        d = abs(_wrap(theta - self.arc_angle))
+        if not signed:
+            d = min(d, abs(_wrap(theta - swapped_angle(self.arc_angle, model))))
+        return model.radius * d
 
     def miss(self, T_world_needle: np.ndarray, model: NeedleModel) -> float:
-        """Distance from the pinch point to the arc over the tolerance (≤ 1: consistent)."""
-        return arc_distance(self.pinch_point, T_world_needle, model) / self.tolerance
+        """Distance from the pinch point to the arc over the tolerance, or the slide from the
+        held place over its own, whichever is worse (≤ 1: consistent)."""
+        near = arc_distance(self.pinch_point, T_world_needle, model) / self.tolerance
+        if self.arc_angle is None:
+            return near
+        return max(near, self.slide(T_world_needle, model) / self.arc_tolerance)
 
     def refusal(self, nearest: float) -> str:
         """The reason when the nearest candidate misses by ``nearest`` tolerances."""
+        if self.arc_angle is None:
+            return (
+                f"no fitted pose passes {self.arm}'s pinch point: nearest "
+                f"{1e3 * nearest * self.tolerance:.1f} mm, tolerance {1e3 * self.tolerance:.1f} mm"
+            )
         return (
-            f"no fitted pose passes {self.arm}'s pinch point: nearest "
-            f"{1e3 * nearest * self.tolerance:.1f} mm, tolerance {1e3 * self.tolerance:.1f} mm"
+            f"no fitted pose passes {self.arm}'s pinch point where its grasp holds the needle "
+            f"({np.degrees(self.arc_angle):.0f}° along the arc): nearest {nearest:.1f}× the "
+            f"tolerance ({1e3 * self.tolerance:.1f} mm off the wire, "
+            f"{1e3 * self.arc_tolerance:.1f} mm along it)"
         )
+
+
+def _wrap(angle: float) -> float:
+    return float((angle + np.pi) % (2 * np.pi) - np.pi)
+
+
+def pinch_angle(point_world: np.ndarray, T_world_needle: np.ndarray) -> float:
+    """Angle (rad, needle frame) of a world point about the arc's centre, in the arc's plane."""
+    T = np.asarray(T_world_needle, float)
+    p = T[:3, :3].T @ (np.asarray(point_world, float) - T[:3, 3])
+    return float(np.arctan2(p[1], p[0]))
+
+
+def swapped_angle(arc_angle: float, model: NeedleModel) -> float:
+    """The arc angle a place takes when base and tip are swapped (mirrored about the bisector)."""
+    return model.base_angle + model.tip_angle - arc_angle
 
 
 def plane_crossings(
@@ -251,11 +299,17 @@ def with_consistent(
     finals: list, T_world: np.ndarray, costs: np.ndarray, priors, model: NeedleModel
 ) -> list:
     """The polish's rows ``finals`` plus the best pose consistent with the priors when none of
-    them is (a worse-cost twin the usual choice of finals leaves out)."""
-    ok = consistent(prior_misses(priors, T_world, model)) & np.isfinite(costs)
-    if ok.any() and not ok[finals].any():
-        finals = [*finals, int(np.argmin(np.where(ok, costs, np.inf)))]
-    return finals
+    them is (a worse-cost twin the usual choice of finals leaves out); when no pose is, the
+    one nearest to consistent (the polish weighs the priors and may bring it in)."""
+    misses = prior_misses(priors, T_world, model)
+    ok = consistent(misses) & np.isfinite(costs)
+    if ok[finals].any():
+        return finals
+    if ok.any():
+        return [*finals, int(np.argmin(np.where(ok, costs, np.inf)))]
+    worst = np.where(np.isfinite(costs), misses.max(axis=1), np.inf)
+    nearest = int(np.argmin(worst))
+    return finals if nearest in finals or not np.isfinite(worst[nearest]) else [*finals, nearest]
 
 
 def check_across_jaws(priors: Sequence[NeedlePrior], T_world: np.ndarray, decided_by: str) -> None:
@@ -269,6 +323,22 @@ def check_across_jaws(priors: Sequence[NeedlePrior], T_world: np.ndarray, decide
                 f"{p.arm}'s jaws (tolerance {p.tolerance_deg:.0f}°) once base and tip were "
                 f"told apart ({decided_by}): a mirror twin or swapped ends"
             )
+
+
+def check_held_place(
+    priors: Sequence[NeedlePrior], T_world: np.ndarray, model: NeedleModel, decided_by: str
+) -> None:
+    """Refuse when, with base and tip told apart, a holder's pinch sits elsewhere along the
+    needle than its grasp holds it (the fit checked the place modulo the swap)."""
+    for p in priors:
+        if isinstance(p, HeldPrior) and p.arc_angle is not None:
+            off = p.slide(T_world, model, signed=True)
+            if off > p.arc_tolerance:
+                raise PriorContradicted(
+                    f"{p.arm}'s pinch sits {1e3 * off:.1f} mm along the needle from where its "
+                    f"grasp holds it (tolerance {1e3 * p.arc_tolerance:.1f} mm) once base and "
+                    f"tip were told apart ({decided_by}): swapped ends"
+                )
 
 
 def check_orientation(
@@ -286,47 +356,3 @@ def check_orientation(
                 f"the needle's ends disagree with {p.source}: {dp * 1e3:.1f} mm / {da:.0f}° "
                 f"from it once base and tip were told apart ({decided_by})"
             )
-
-
-#: Seeds per held needle: turns of the radius at the pinch point about the needle's normal,
-#: and places of the pinch along the arc (from the tip to the base).
-SEED_TURNS, SEED_PLACES = 16, 5
-
-
-def seed_poses(priors: Sequence[NeedlePrior], model: NeedleModel) -> np.ndarray:
-    """World poses (K, 4, 4) that agree with a held-by prior and the across-the-jaws face
-    of the same arm: the fit's starts for a needle whose seen piece alone leaves it loose or
-    whose twins the image search finds first (empty: the priors do not pin a needle).
-
-    The circle passes through the pinch point with its normal along the face; what is left
-    free, the radius's turn at the pinch and where along the arc the jaw holds it, is
-    sampled (SEED_TURNS × SEED_PLACES). With a port prior the turns are those whose circle
-    passes nearest the port as well."""
-    held = {p.arm: p for p in priors if isinstance(p, HeldPrior)}
-    faces = [p for p in priors if isinstance(p, AcrossJawsPrior) and p.arm in held]
-    if not faces:
-        return np.zeros((0, 4, 4))
-    jaws, pinch = faces[0], np.asarray(held[faces[0].arm].pinch_point, float)
-    z = np.asarray(jaws.face, float) / np.linalg.norm(jaws.face)
-    e0 = np.cross(z, [1.0, 0.0, 0.0] if abs(z[0]) < 0.9 else [0.0, 1.0, 0.0])
-    e0 /= np.linalg.norm(e0)
-    e1 = np.cross(z, e0)
-    turns = np.linspace(0.0, 2 * np.pi, SEED_TURNS, endpoint=False)
-    ports = [p for p in priors if isinstance(p, PortPrior)]
-    if ports:
-        centres = pinch - model.radius * (np.cos(turns)[:, None] * e0 + np.sin(turns)[:, None] * e1)
-        miss = [
-            abs(np.linalg.norm(np.cross(ports[0].point - c, z)) - model.radius) for c in centres
-        ]
-        turns = turns[np.argsort(miss)[:4]]
-    places = np.linspace(model.tip_angle, model.base_angle, SEED_PLACES + 2)[1:-1]
-    # Every (turn, place) at once: the radial (centre → pinch, world) and, the pinch at arc
-    # angle a, the needle's x turned by -a from it.
-    psi, a = (v.ravel() for v in np.meshgrid(turns, places, indexing="ij"))
-    radial = np.cos(psi)[:, None] * e0 + np.sin(psi)[:, None] * e1
-    x = np.cos(-a)[:, None] * radial + np.sin(-a)[:, None] * np.cross(z, radial)
-    out = np.zeros((len(psi), 4, 4))
-    out[:, :3, 0], out[:, :3, 1], out[:, :3, 2] = x, np.cross(z, x), z
-    out[:, :3, 3] = pinch - model.radius * radial
-    out[:, 3, 3] = 1.0
-    return out

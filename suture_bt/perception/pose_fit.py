@@ -62,7 +62,7 @@ from suture_bt.perception.needle_projection import (
     params_to_pose,
     pose_to_params,
 )
-from suture_bt.perception.prior_term import PriorTerm
+from suture_bt.perception.prior_term import HeldPlaceTerm, PriorTerm
 from suture_bt.perception.refusal import NeedleNotFound
 from suture_bt.perception.rival_probe import (
     FitRays,
@@ -145,7 +145,7 @@ class PoseFitter:
     ) -> PoseFitResult:
         """Fit; ``endpoints_left`` = (base uv, tip uv) in the left image; raise NeedleNotFound.
 
-        ``seeds`` (K, 4, 4: left-camera poses, e.g. :func:`~needle_prior.seed_poses` of the
+        ``seeds`` (K, 4, 4: left-camera poses, e.g. :func:`~prior_seeds.seed_poses` of the
         priors) are further starts, the ``n_keep`` cheapest of them searched with the rest.
 
         ``end_priors`` (left, right pixel arrays) are keypoints the network is sure of: each
@@ -183,6 +183,8 @@ class PoseFitter:
         terms = [FreeSpaceTerm(self.stereo, self.model, (left, right))]
         if end_priors is not None:
             terms.append(EndPriorTerm(self.stereo, self.model, end_priors))
+        if priors:
+            terms.append(HeldPlaceTerm(priors, cam.T_cam_world, self.model))
         terms = [t for t in terms if t]
         coarse_w = np.concatenate(
             [np.ones(len(coarse))] + [t.column_weights(len(coarse)) for t in terms]

@@ -4,9 +4,11 @@ A held-by prior (the pinch point) and a port prior (the port) each say that a kn
 on the needle's arc within a tolerance. Where the image pins the pose well this changes
 nothing; where only a short piece of the needle is seen (a needle mostly inside the tissue and
 the jaw) the image leaves the plane loose, and the two known points on the arc fix its depth and
-turn. The term pulls the polish towards them (a robust loss: an image that contradicts a prior
-is not forced onto it, the prior gate then refuses it), and :func:`prior_information` adds
-their information to the fit's predicted spread.
+turn; a held place (where along the needle the grasp holds it) fixes its slide along its own
+circle, which nothing else does when both ends are hidden. The term pulls the polish towards
+them (a robust loss: an image that contradicts a prior is not forced onto it, the prior gate
+then refuses it), and :func:`prior_information` adds their information to the fit's predicted
+spread.
 """
 
 from __future__ import annotations
@@ -18,7 +20,7 @@ import numpy as np
 from numba import njit
 
 from suture_bt.geometry import NeedleModel
-from suture_bt.perception.needle_prior import HeldPrior, NeedlePrior, PortPrior
+from suture_bt.perception.needle_prior import HeldPrior, NeedlePrior, PortPrior, swapped_angle
 
 #: Pixels a miss of one tolerance counts as in the polish (about the spread of the edge
 #: residuals there), so a prior weighs like an edge point as well placed as its tolerance says.
@@ -31,22 +33,29 @@ PRIOR_WEIGHT = 4.0
 
 
 class PriorTerm:
-    """Residuals (K, 3·P): each prior point's offset to the arc over its tolerance, in
-    PRIOR_PX per tolerance. Poses are left-camera ones, so points are taken to that frame."""
+    """Residuals (K, 3·P + Q): each prior point's offset to the arc over its tolerance, then
+    each held place's slide (a holder's pinch along the arc from where its grasp holds the
+    needle, modulo the base ↔ tip swap) over its own, in PRIOR_PX per tolerance. Poses are
+    left-camera ones, so points are taken to that frame."""
 
     polish = True
 
     def __init__(
         self, priors: Sequence[NeedlePrior], T_cam_world: np.ndarray, model: NeedleModel
     ) -> None:
-        pts, tol = [], []
+        pts, tol, places = [], [], []
         for p in priors:
             if isinstance(p, HeldPrior | PortPrior):
                 point = p.pinch_point if isinstance(p, HeldPrior) else p.point
                 pts.append(T_cam_world[:3, :3] @ np.asarray(point, float) + T_cam_world[:3, 3])
                 tol.append(p.tolerance)
+            if isinstance(p, HeldPrior) and p.arc_angle is not None:
+                a = float(p.arc_angle)
+                places.append((len(pts) - 1, a, swapped_angle(a, model), p.arc_tolerance))
         self.points = np.ascontiguousarray(np.array(pts, dtype=np.float64).reshape(-1, 3))
         self.tolerance = np.array(tol)
+        #: Held places: (index of the pinch point, arc angle, its swap's, tolerance along the arc).
+        self.places = places
         self.model = model
         self._ends = np.stack([model.tip, model.base]).astype(np.float64)
 
@@ -61,11 +70,44 @@ class PriorTerm:
         off = _arc_offsets(T, self.points, m.radius, m.tip_angle, m.base_angle, self._ends)
         return off / self.tolerance[None, :, None]
 
+    def slides(self, T: np.ndarray) -> np.ndarray:
+        """Each held place's signed slide (K, Q) over its tolerance: the pinch point's angle
+        on the pose's circle from the held place, or from its swap's if that is nearer."""
+        out = np.zeros((len(T), len(self.places)))
+        for j, (i, a, a_swapped, tol) in enumerate(self.places):
+            p = np.einsum("kji,kj->ki", T[:, :3, :3], self.points[i][None] - T[:, :3, 3])
+            theta = np.arctan2(p[:, 1], p[:, 0])
+            d = [(theta - b + np.pi) % (2 * np.pi) - np.pi for b in (a, a_swapped)]
+            out[:, j] = np.where(np.abs(d[0]) <= np.abs(d[1]), d[0], d[1]) * self.model.radius / tol
+        return out
+
+    def scaled(self, T: np.ndarray) -> np.ndarray:
+        """Every residual (K, 3·P + Q) in tolerances: the points' offsets, then the slides."""
+        return np.concatenate([self.misses(T).reshape(len(T), -1), self.slides(T)], axis=1)
+
     def __call__(self, T: np.ndarray) -> np.ndarray:
-        return PRIOR_PX * self.misses(T).reshape(len(T), -1)
+        return PRIOR_PX * self.scaled(T)
 
     def column_weights(self, n_edge: int) -> np.ndarray:
-        return np.full(3 * len(self.points), PRIOR_WEIGHT)
+        return np.full(3 * len(self.points) + len(self.places), PRIOR_WEIGHT)
+
+
+class HeldPlaceTerm(PriorTerm):
+    """The held places' slides alone, for the search before the polish: a needle whose ends
+    are both hidden slides along its circle at no cost to the image, so the search's poses
+    would stay wherever they start; this draws them to where the grasp holds the needle
+    (the polish then weighs every prior, :class:`PriorTerm`)."""
+
+    polish = False
+
+    def __bool__(self) -> bool:
+        return len(self.places) > 0
+
+    def scaled(self, T: np.ndarray) -> np.ndarray:
+        return self.slides(T)
+
+    def column_weights(self, n_edge: int) -> np.ndarray:
+        return np.full(len(self.places), PRIOR_WEIGHT)
 
 
 @njit(cache=True)
@@ -106,6 +148,6 @@ def prior_information(term: PriorTerm | None, T: np.ndarray, T6: np.ndarray, ste
     tolerances (each prior taken at its stated tolerance, as a Gaussian)."""
     if not term:
         return np.zeros((6, 6))
-    m0 = term.misses(T[None]).reshape(-1)
-    J = (term.misses(T6).reshape(6, -1) - m0[None]) / np.asarray(steps)[:, None]
+    m0 = term.scaled(T[None]).reshape(-1)
+    J = (term.scaled(T6).reshape(6, -1) - m0[None]) / np.asarray(steps)[:, None]
     return J @ J.T
