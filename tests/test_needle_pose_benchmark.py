@@ -59,7 +59,8 @@ def test_tiny_run_localizes_an_unoccluded_scene_at_1080p():
 
 def test_task_sets_build_scenes_whose_priors_hold_at_the_truth():
     """Each task set's scene puts the needle in front of the cameras, held where its holder's
-    pinch point is (and through its ports in a port), so the task priors are true ones."""
+    pinch point is (and through its ports in a port, near where its grasp meant to hold it),
+    so the task priors are true ones."""
     import needle_task_scenes  # noqa: E402
 
     from suture_bt.datagen.needle_data import SimScene  # noqa: E402
@@ -78,5 +79,9 @@ def test_task_sets_build_scenes_whose_priors_hold_at_the_truth():
                 assert 0.02 < z < 0.2, (name, z)
                 if name == "in_port":
                     assert any(type(p).__name__ == "PortPrior" for p in priors)
+                    # The caller's grasp says where along the needle the jaw holds it.
+                    held = next(p for p in priors if type(p).__name__ == "HeldPrior")
+                    assert held.arc_angle is not None
+                    assert held.slide(s.T_world_needle, sim.model, signed=True) < 0.0005
     finally:
         sim.close()
