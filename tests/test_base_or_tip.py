@@ -11,7 +11,6 @@ from suture_bt.geometry import NeedleModel
 from suture_bt.perception.base_or_tip import BaseTipChooser
 from suture_bt.perception.base_or_tip import on_mask as _on_mask
 from suture_bt.perception.colour_refine import ColourRule
-from suture_bt.perception.needle_ends import swapped
 from suture_bt.perception.needle_projection import rasterize_needle
 from suture_bt.perception.pose_fit import MaskView, NeedleNotFound
 from suture_bt.transforms import invert, make_transform
@@ -41,7 +40,7 @@ def test_without_the_band_the_ends_follow_the_previous_estimate_or_are_refused()
         views.append(MaskView(mask))
     with pytest.raises(NeedleNotFound, match="which end is the base"):
         loc.base_tip.orient(T, images, views, 3.0, None)
-    for previous in (T, swapped(T, loc.model)):
+    for previous in (T, loc.model.swapped(T)):
         out, _, decided_by = loc.base_tip.orient(T, images, views, 3.0, previous)
         assert decided_by == "previous"
         np.testing.assert_allclose(out, previous, atol=1e-9)

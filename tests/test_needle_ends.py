@@ -12,8 +12,6 @@ from suture_bt.perception.needle_ends import (
     band_miss_px,
     band_offset,
     base_evidence,
-    swap_rotation,
-    swapped,
     violet_score,
     with_band_pieces,
 )
@@ -49,13 +47,13 @@ def _pose() -> np.ndarray:
 
 
 def test_swap_is_a_half_turn_that_exchanges_the_ends():
-    R = swap_rotation(MODEL)
+    R = MODEL.swap_rotation()
     assert np.allclose(R @ R, np.eye(3)) and np.isclose(np.linalg.det(R), 1.0)
     assert np.allclose(R @ MODEL.base, MODEL.tip, atol=1e-12)
     T = _pose()
-    Ts = swapped(T, MODEL)
+    Ts = MODEL.swapped(T)
     assert np.allclose(Ts[:3, 3], T[:3, 3])
-    assert np.allclose(swapped(Ts, MODEL), T)
+    assert np.allclose(MODEL.swapped(Ts), T)
 
 
 def test_violet_band_scores_high_and_metal_near_zero():
@@ -68,7 +66,7 @@ def test_band_colour_tells_the_right_pose_from_its_swap():
     T = _pose()
     images, views, cams = _scene(T)
     right = base_evidence(images, views, cams, T, MODEL)
-    wrong = base_evidence(images, views, cams, swapped(T, MODEL), MODEL)
+    wrong = base_evidence(images, views, cams, MODEL.swapped(T), MODEL)
     assert right > MIN_EVIDENCE
     assert wrong < -MIN_EVIDENCE
 
@@ -95,7 +93,7 @@ def test_band_position_decides_when_the_fit_is_a_few_pixels_off():
     rough = T.copy()
     rough[:3, 3] += (0.0015, -0.0015, 0.002)
     assert base_evidence(images, views, cams, rough, MODEL) > MIN_EVIDENCE
-    assert base_evidence(images, views, cams, swapped(rough, MODEL), MODEL) < -MIN_EVIDENCE
+    assert base_evidence(images, views, cams, MODEL.swapped(rough), MODEL) < -MIN_EVIDENCE
 
 
 def _slid(T: np.ndarray, angle: float) -> np.ndarray:
@@ -154,7 +152,7 @@ def test_grey_at_an_end_touching_an_occluder_does_not_vote():
         return bool(np.linalg.norm(uv - base_px[eye]) < 5.0)
 
     assert base_evidence(images, views, cams, T, MODEL, end_hidden=hidden) > MIN_EVIDENCE
-    flipped = swapped(T, MODEL)
+    flipped = MODEL.swapped(T)
     assert base_evidence(images, views, cams, flipped, MODEL, end_hidden=hidden) < -MIN_EVIDENCE
 
 

@@ -6,7 +6,6 @@ import pytest
 from perception_helpers import pose_errors
 from test_pose_fit import MODEL, _scene_1080p, _tip_disc_hidden, _tip_hidden
 
-from suture_bt.perception.needle_ends import swap_rotation
 from suture_bt.perception.needle_prior import (
     AcrossJawsPrior,
     HeldPrior,
@@ -270,7 +269,7 @@ def test_a_held_place_measures_the_slide_along_the_arc_modulo_the_swap():
     assert far.miss(T, MODEL) == pytest.approx(0.1 * MODEL.radius / 0.0005)
     assert "where its grasp holds the needle" in far.refusal(far.miss(T, MODEL))
     swapped = T.copy()
-    swapped[:3, :3] = swap_rotation(MODEL)  # base and tip exchanged: same outline
+    swapped[:3, :3] = MODEL.swap_rotation()  # base and tip exchanged: same outline
     assert held.miss(swapped, MODEL) < 1e-6  # modulo the swap
     assert held.slide(swapped, MODEL, signed=True) > 0.005
     check_held_place([held], T, MODEL, "colour")

@@ -11,7 +11,6 @@ from suture_bt.geometry import NeedleModel
 from suture_bt.perception.edge_residuals import edge_rays
 from suture_bt.perception.fit_solver import FD_STEPS, _pose_derivatives, pose_uncertainty
 from suture_bt.perception.mask_view import edge_points
-from suture_bt.perception.needle_ends import swap_rotation
 from suture_bt.perception.needle_prior import (
     HeldPrior,
     PortPrior,
@@ -137,7 +136,7 @@ def test_a_held_place_adds_the_slide_along_the_circle_a_point_alone_leaves_free(
     slid = T @ turn
     assert term.slides(slid[None])[0, 0] == pytest.approx(-0.05 * MODEL.radius / 0.0005)
     swapped = T.copy()
-    swapped[:3, :3] = T[:3, :3] @ swap_rotation(MODEL)
+    swapped[:3, :3] = T[:3, :3] @ MODEL.swap_rotation()
     assert abs(term.slides(swapped[None])[0, 0]) < 1e-9
     x = pose_to_params(T[None], st.left, MODEL)
     T0 = params_to_pose(x, st.left, MODEL)

@@ -29,7 +29,6 @@ from suture_bt.perception.rival_probe import (
     probe_starts,
     rival,
     slide_starts,
-    swapped,
     tie_ratio,
 )
 
@@ -85,7 +84,7 @@ def test_the_swap_is_the_same_outline_with_base_and_tip_exchanged():
     T = _pose((10.0, -20.0, 30.0), (0.01, -0.02, 0.1))
     angles = np.linspace(MODEL.base_angle, MODEL.tip_angle, 9)
     arc = MODEL.point_at(angles) @ T[:3, :3].T + T[:3, 3]
-    S = swapped(T, MODEL)
+    S = MODEL.swapped(T)
     arc_swapped = MODEL.point_at(angles) @ S[:3, :3].T + S[:3, 3]
     assert np.allclose(arc_swapped, arc[::-1], atol=1e-9)
     assert np.isclose(pose_offset(T, S)[1], 180.0)
@@ -93,7 +92,7 @@ def test_the_swap_is_the_same_outline_with_base_and_tip_exchanged():
 
 def test_a_tie_ignores_the_answers_own_swap_and_unusable_poses():
     T = _pose()
-    poses = np.stack([T, swapped(T, MODEL), _pose((0.0, 30.0, 0.0)), _pose((0.0, 60.0, 0.0))])
+    poses = np.stack([T, MODEL.swapped(T), _pose((0.0, 30.0, 0.0)), _pose((0.0, 60.0, 0.0))])
     costs = np.array([1.0, 1.0, 1.004, 0.9])
     usable = np.array([True, True, True, False])
     # pose 1 is the answer's own outline; pose 3 is cheaper but a prior refuses it

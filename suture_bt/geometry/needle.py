@@ -64,6 +64,23 @@ class NeedleModel:
     def base(self) -> np.ndarray:
         return self.point_at(self.base_angle)
 
+    def swap_rotation(self) -> np.ndarray:
+        """The half turn (needle frame) about the arc's bisector that exchanges base and tip:
+        the same outline, ends swapped (an arc angle a goes to base + tip - a)."""
+        mid = 0.5 * (self.base_angle + self.tip_angle)
+        axis = np.array([np.cos(mid), np.sin(mid), 0.0])
+        return 2.0 * np.outer(axis, axis) - np.eye(3)
+
+    def swapped(self, T_needle: np.ndarray) -> np.ndarray:
+        """The pose with base and tip exchanged (the arc centre and outline stay put)."""
+        T = np.array(T_needle, dtype=float)
+        T[..., :3, :3] = T[..., :3, :3] @ self.swap_rotation()
+        return T
+
+    def swapped_angle(self, arc_angle: float) -> float:
+        """The arc angle a place on the needle takes when base and tip are exchanged."""
+        return self.base_angle + self.tip_angle - arc_angle
+
     def scored_points(self, T_world_needle: np.ndarray) -> dict[str, np.ndarray]:
         """SRC base/mid/tip scoring points in the world for a needle pose."""
         R, p = T_world_needle[:3, :3], T_world_needle[:3, 3]

@@ -21,7 +21,6 @@ from suture_bt.perception.needle_ends import (
     band_miss_px,
     band_offset,
     base_evidence,
-    swapped,
 )
 from suture_bt.perception.occlusion import end_is_occluded
 from suture_bt.perception.refusal import NeedleNotFound
@@ -115,7 +114,7 @@ class BaseTipChooser:
             ends_cut=self.ends_in_tissue(T_cam),
         )
         if abs(evidence) >= MIN_EVIDENCE:
-            T_cam = T_cam if evidence > 0 else swapped(T_cam, self.model)
+            T_cam = T_cam if evidence > 0 else self.model.swapped(T_cam)
             offset = band_offset(images, tuple(views), cams, T_cam, self.model)
             if offset is not None and offset > MAX_BAND_OFFSET:
                 raise NeedleNotFound(
@@ -133,12 +132,12 @@ class BaseTipChooser:
                 )
             return T_cam, evidence, "colour"
         if previous is not None:
-            other = swapped(T_cam, self.model)
+            other = self.model.swapped(T_cam)
             prev = np.asarray(previous, float)[:3, :3]
             keep = rotation_angle(prev, T_cam[:3, :3]) <= rotation_angle(prev, other[:3, :3])
             return (T_cam if keep else other), evidence, "previous"
         if jaws:
-            other = swapped(T_cam, self.model)
+            other = self.model.swapped(T_cam)
             to_world = self.stereo.left.T_world_cam
             keep = jaws[0].facing(to_world @ T_cam, to_world @ other)
             return (T_cam if keep else other), evidence, "jaws"

@@ -40,20 +40,6 @@ MIN_EVIDENCE = 0.15
 MIN_BAND_PIXELS = 6
 
 
-def swap_rotation(model: NeedleModel) -> np.ndarray:
-    """The half turn (needle frame) about the arc's bisector that swaps base and tip."""
-    mid = 0.5 * (model.base_angle + model.tip_angle)
-    axis = np.array([np.cos(mid), np.sin(mid), 0.0])
-    return 2.0 * np.outer(axis, axis) - np.eye(3)
-
-
-def swapped(T_cam_needle: np.ndarray, model: NeedleModel) -> np.ndarray:
-    """The same outline with base and tip exchanged (the arc centre stays put)."""
-    T = np.array(T_cam_needle, dtype=float)
-    T[:3, :3] = T[:3, :3] @ swap_rotation(model)
-    return T
-
-
 #: Largest band piece (px) relative to the band's area seen at the given depth: a bigger violet
 #: blob is not the band.
 MAX_BAND_AREA_RATIO = 2.0

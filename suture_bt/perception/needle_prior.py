@@ -60,13 +60,6 @@ def arc_distance(point_world: np.ndarray, T_world_needle: np.ndarray, model: Nee
     return float(np.linalg.norm(arc_offsets(np.asarray(T_world_needle)[None], point, model)))
 
 
-def _swap_rotation(model: NeedleModel) -> np.ndarray:
-    """The half turn about the arc's bisector that exchanges base and tip (needle frame)."""
-    mid = 0.5 * (model.base_angle + model.tip_angle)
-    axis = np.array([np.cos(mid), np.sin(mid), 0.0])
-    return 2.0 * np.outer(axis, axis) - np.eye(3)
-
-
 @dataclass(frozen=True)
 class HeldPrior:
     """Held by ``arm``: the wire passes within ``tolerance`` (m) of ``pinch_point`` (world).
@@ -92,7 +85,7 @@ class HeldPrior:
         theta = pinch_angle(self.pinch_point, T_world_needle)
         d = abs(_wrap(theta - self.arc_angle))
         if not signed:
-            d = min(d, abs(_wrap(theta - swapped_angle(self.arc_angle, model))))
+            d = min(d, abs(_wrap(theta - model.swapped_angle(self.arc_angle))))
         return model.radius * d
 
     def miss(self, T_world_needle: np.ndarray, model: NeedleModel) -> float:
@@ -127,11 +120,6 @@ def pinch_angle(point_world: np.ndarray, T_world_needle: np.ndarray) -> float:
     T = np.asarray(T_world_needle, float)
     p = T[:3, :3].T @ (np.asarray(point_world, float) - T[:3, 3])
     return float(np.arctan2(p[1], p[0]))
-
-
-def swapped_angle(arc_angle: float, model: NeedleModel) -> float:
-    """The arc angle a place takes when base and tip are swapped (mirrored about the bisector)."""
-    return model.base_angle + model.tip_angle - arc_angle
 
 
 def plane_crossings(
@@ -199,7 +187,7 @@ class PredictedPosePrior:
         P = np.asarray(self.T_world_needle, float)
         dp = float(np.linalg.norm(T_world_needle[:3, 3] - P[:3, 3]))
         R = T_world_needle[:3, :3]
-        da = min(rotation_angle(P[:3, :3], R), rotation_angle(P[:3, :3], R @ _swap_rotation(model)))
+        da = min(rotation_angle(P[:3, :3], R), rotation_angle(P[:3, :3], R @ model.swap_rotation()))
         return dp, float(np.degrees(da))
 
     def miss(self, T_world_needle: np.ndarray, model: NeedleModel) -> float:

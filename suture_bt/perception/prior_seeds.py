@@ -18,7 +18,6 @@ from suture_bt.perception.needle_prior import (
     HeldPrior,
     NeedlePrior,
     PortPrior,
-    swapped_angle,
 )
 
 #: Seeds per held needle: turns of the radius at the pinch point about the needle's normal,
@@ -57,7 +56,7 @@ def seed_poses(priors: Sequence[NeedlePrior], model: NeedleModel) -> np.ndarray:
     if held_at is None:
         places = np.linspace(model.tip_angle, model.base_angle, SEED_PLACES + 2)[1:-1]
     else:  # where the grasp holds it (and the swap's place: the fit's ends are not told yet)
-        places = np.array([held_at, swapped_angle(held_at, model)])
+        places = np.array([held_at, model.swapped_angle(held_at)])
     # Every (turn, place) at once: the radial (centre → pinch, world) and, the pinch at arc
     # angle a, the needle's x turned by -a from it.
     psi, a = (v.ravel() for v in np.meshgrid(turns, places, indexing="ij"))

@@ -20,7 +20,7 @@ import numpy as np
 from numba import njit
 
 from suture_bt.geometry import NeedleModel
-from suture_bt.perception.needle_prior import HeldPrior, NeedlePrior, PortPrior, swapped_angle
+from suture_bt.perception.needle_prior import HeldPrior, NeedlePrior, PortPrior
 
 #: Pixels a miss of one tolerance counts as in the polish (about the spread of the edge
 #: residuals there), so a prior weighs like an edge point as well placed as its tolerance says.
@@ -51,7 +51,7 @@ class PriorTerm:
                 tol.append(p.tolerance)
             if isinstance(p, HeldPrior) and p.arc_angle is not None:
                 a = float(p.arc_angle)
-                places.append((len(pts) - 1, a, swapped_angle(a, model), p.arc_tolerance))
+                places.append((len(pts) - 1, a, model.swapped_angle(a), p.arc_tolerance))
         self.points = np.ascontiguousarray(np.array(pts, dtype=np.float64).reshape(-1, 3))
         self.tolerance = np.array(tol)
         #: Held places: (index of the pinch point, arc angle, its swap's, tolerance along the arc).
