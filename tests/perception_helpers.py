@@ -41,10 +41,11 @@ def pose_errors(Ta: np.ndarray, Tb: np.ndarray) -> tuple[float, float]:
     return pos, ang
 
 
-def task_scene(name: str, i: int, seed: int = 6173):
+def task_scene(name: str, i: int, seed: int = 6173, **constants):
     """Development scene ``i`` of the needle benchmark's task set ``name`` (seed 6173, the
     tuning seed) rendered in the simulator: (stereo model, left, right, true T_cam_needle, task
-    priors, the phantom's tissue model)."""
+    priors, the phantom's tissue model). ``constants`` override the scene builders' module
+    constants for this scene (e.g. ``HELD_PLACE_SPREAD=0.0``: the grasp exactly where meant)."""
     import sys
     from pathlib import Path
 
@@ -57,7 +58,10 @@ def task_scene(name: str, i: int, seed: int = 6173):
     from suture_bt.transforms import invert
 
     sim = SimScene(1920, 1080)
+    saved = {k: getattr(needle_task_scenes, k) for k in constants}
     try:
+        for k, v in constants.items():
+            setattr(needle_task_scenes, k, v)
         rng = np.random.default_rng([seed, needle_pose.SETS.index(name), i])
         s, priors = needle_task_scenes.BUILDERS[name](sim, rng)
         sim.apply(s)
@@ -69,4 +73,6 @@ def task_scene(name: str, i: int, seed: int = 6173):
         T_true = invert(sim.stereo.left.T_world_cam) @ s.T_world_needle
         return sim.stereo, left, right, T_true, priors, tissue
     finally:
+        for k, v in saved.items():
+            setattr(needle_task_scenes, k, v)
         sim.close()

@@ -154,12 +154,17 @@ def test_grey_where_the_wire_goes_into_the_tissue_does_not_say_tip():
     swapped (180 deg off); now it is the needle or a refusal."""
     stereo_model, left, right, T, priors, tissue = task_scene("in_port", 15)
     # The exposure gate off: since session 19 (1 mm) it refuses this fit before the base-or-tip
-    # choice, which is what is tested here.
+    # choice, which is what is tested here. So are the rival, tie and spread gates: since
+    # session 20 the scene's grasp is drawn off where it was meant, and the slide along the
+    # circle this view leaves loose (8-10 deg at 1.00x the cost) refuses it first.
     loc = NeedleLocalizer(stereo_model, tissue=tissue, max_exposed=float("inf"))
+    loc.max_rival_ratio, loc.max_tie_ratio = 0.0, 0.0
+    loc.max_angle_std_deg, loc.max_position_std_mm = 1e3, 1e3
     try:
         est = loc.localize(left, right)
     except NeedleNotFound as exc:
         assert "which end is the base" in exc.reason
     else:
         pos, ang = pose_errors(est.T_cam_needle, T)
-        assert pos < 2.0 and ang < 5.0
+        _, ang_swapped = pose_errors(est.T_cam_needle, loc.model.swapped(T))
+        assert pos < 2.0 and ang < ang_swapped  # the needle, perhaps slid along its circle

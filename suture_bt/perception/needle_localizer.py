@@ -37,6 +37,7 @@ from suture_bt.perception.fit_attempts import (  # noqa: F401 - gates, re-export
     MAX_POSITION_STD_MM,
     MAX_RIVAL_RATIO,
     MAX_RMS_PX,
+    MAX_TIE_RATIO,
     MIN_INLIER_FRACTION,
     STRONG_KEYPOINT_SCORE,
     FitAttempts,
@@ -155,6 +156,8 @@ class NeedleLocalizer:
         self.max_angle_std_deg_held = max_angle_std_deg_held
         #: A clearly different pose within this ratio of the answer's cost refuses it.
         self.max_rival_ratio = MAX_RIVAL_RATIO
+        #: A clearly different candidate within this ratio of the answer's cost is a tie: refused.
+        self.max_tie_ratio = MAX_TIE_RATIO
         #: An answer whose predicted arc-centre spread exceeds this (mm) is refused.
         self.max_position_std_mm = MAX_POSITION_STD_MM
         self.tissue = tissue
@@ -350,6 +353,7 @@ class NeedleLocalizer:
             self._angle_std_limit(priors),
             self.max_rival_ratio,
             self.max_position_std_mm,
+            self.max_tie_ratio,
         )
         return attempts(images, views, ends, depth, half_width, previous, kp, score, priors)
 
