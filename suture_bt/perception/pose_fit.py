@@ -230,11 +230,11 @@ class PoseFitter:
             # The best pose's own end pixels and depth are sharper than any keypoint: a fresh
             # grid of plane angles there reaches the tilt-mirror twin the first starts missed.
             # A close rival's ends may be the right ones: it seeds the search too.
-            seeds = self._diverse(x, c, 2)
-            if len(seeds) > 1 and not c[seeds[1]] <= RESEED_RIVAL_RATIO * c[seeds[0]]:
-                seeds = seeds[:1]
+            best = self._diverse(x, c, 2)  # rows of x (not the prior ``seeds``)
+            if len(best) > 1 and not c[best[1]] <= RESEED_RIVAL_RATIO * c[best[0]]:
+                best = best[:1]
             st = []
-            for T_best in params_to_pose(x[seeds], cam, self.model):
+            for T_best in params_to_pose(x[best], cam, self.model):
                 ends = tuple(end_pixels(cam, T_best, self.model))
                 st.append(best_starts(ends, float(T_best[2, 3]), self.n_reseed))
             st = np.concatenate(st)
