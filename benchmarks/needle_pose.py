@@ -270,7 +270,7 @@ def _summary(rows: list[dict]) -> dict:
     }
 
 
-def _localize_row(loc, left, right, T_true, priors, R_swap) -> dict:
+def _localize_row(loc, left, right, T_true, priors) -> dict:
     """One localiser call scored against the truth (a row's answer fields)."""
     row: dict = {"prior": [type(p).__name__ for p in priors]}
     t0 = time.perf_counter()
@@ -279,9 +279,7 @@ def _localize_row(loc, left, right, T_true, priors, R_swap) -> dict:
     except NeedleNotFound as exc:
         return row | {"found": False, "reason": exc.reason, "wall_ms": _ms(t0)}
     pos, ang, t1 = _errors(est.T_cam_needle, T_true)
-    T_sw = T_true.copy()
-    T_sw[:3, :3] = T_true[:3, :3] @ R_swap
-    _, ang_sw, _ = _errors(est.T_cam_needle, T_sw)
+    _, ang_sw, _ = _errors(est.T_cam_needle, loc.model.swapped(T_true))
     return row | {
         "found": True,
         "wall_ms": _ms(t0),
@@ -348,9 +346,6 @@ def run(
         tissue=phantom_tissue(ph, sim.stereo.left.T_world_cam[:3, 3]),
         **kw,
     )
-    # The needle's 180° symmetry about its bisector (base ↔ tip) as a rotation in its frame.
-    mid = (sim.model.base_angle + sim.model.tip_angle) / 2
-    R_swap = Rotation.from_rotvec(np.pi * np.array([np.cos(mid), np.sin(mid), 0.0])).as_matrix()
     results = {}
     try:
         for ci, cond in enumerate(SETS):
@@ -380,7 +375,7 @@ def run(
                 }
                 for m in modes:
                     pr = (task_priors if m == "task" else []) if task else _priors(sim, s, m)
-                    rows[m].append(base | _localize_row(loc, left, right, T_true, pr, R_swap))
+                    rows[m].append(base | _localize_row(loc, left, right, T_true, pr))
                 ok = [r for r in rows[modes[0]] if r["found"]]
                 if ok:
                     bar.set_postfix(

@@ -49,10 +49,10 @@ from suture_bt.skills import presentation
 from suture_bt.skills.grasps import (
     END_MARGIN,
     MIN_JAW_SEPARATION,
-    PULL_GRASP_OFFSET,
     backed_off,
     hand,
     insertion_grasp_angle,
+    pulling_grasp_angle,
     pulling_hand,
     tip_goal,
 )
@@ -206,7 +206,7 @@ def in_port(sim, rng):
             arm, held_at, pulling = "psm2", insertion_grasp_angle(arc), False
             phi = rng.uniform(arc.port_angle + 0.0003 / m.radius, arc.insert_end_angle)
         else:  # pulling through: from the insertion's end until the base nears the exit
-            arm, held_at, pulling = "psm1", m.tip_angle + PULL_GRASP_OFFSET, True
+            arm, held_at, pulling = "psm1", pulling_grasp_angle(m), True
             phi = rng.uniform(arc.insert_end_angle, arc.base_at_exit_angle - 0.3)
         # The jaw holds the needle a little off where the grasp meant to (the caller's prior).
         T_hand = hand(m, held_at + rng.normal(0.0, HELD_PLACE_SPREAD) / m.radius, pulling)

@@ -39,9 +39,14 @@ def hand(needle: NeedleModel, arc_angle: float, pulling: bool = False) -> np.nda
     return make_transform(R, np.array([0.0, 0.0, -GRASP_DEPTH]) - R @ needle.point_at(a))
 
 
+def pulling_grasp_angle(needle: NeedleModel) -> float:
+    """Arc angle where the arm that takes an emerged needle out past an exit holds it."""
+    return float(needle.tip_angle + PULL_GRASP_OFFSET)
+
+
 def pulling_hand(needle: NeedleModel) -> np.ndarray:
     """T_tip_needle of the arm that takes an emerged needle out past an exit."""
-    return hand(needle, needle.tip_angle + PULL_GRASP_OFFSET, pulling=True)
+    return hand(needle, pulling_grasp_angle(needle), pulling=True)
 
 
 def tip_goal(T_world_needle: np.ndarray, T_tip_needle: np.ndarray) -> np.ndarray:

@@ -41,11 +41,10 @@ def pose_errors(Ta: np.ndarray, Tb: np.ndarray) -> tuple[float, float]:
     return pos, ang
 
 
-def task_scene(name: str, i: int, seed: int = 6173, **constants):
+def task_scene(name: str, i: int, seed: int = 6173):
     """Development scene ``i`` of the needle benchmark's task set ``name`` (seed 6173, the
     tuning seed) rendered in the simulator: (stereo model, left, right, true T_cam_needle, task
-    priors, the phantom's tissue model). ``constants`` override the scene builders' module
-    constants for this scene (e.g. ``HELD_PLACE_SPREAD=0.0``: the grasp exactly where meant)."""
+    priors, the phantom's tissue model)."""
     import sys
     from pathlib import Path
 
@@ -58,10 +57,7 @@ def task_scene(name: str, i: int, seed: int = 6173, **constants):
     from suture_bt.transforms import invert
 
     sim = SimScene(1920, 1080)
-    saved = {k: getattr(needle_task_scenes, k) for k in constants}
     try:
-        for k, v in constants.items():
-            setattr(needle_task_scenes, k, v)
         rng = np.random.default_rng([seed, needle_pose.SETS.index(name), i])
         s, priors = needle_task_scenes.BUILDERS[name](sim, rng)
         sim.apply(s)
@@ -73,6 +69,4 @@ def task_scene(name: str, i: int, seed: int = 6173, **constants):
         T_true = invert(sim.stereo.left.T_world_cam) @ s.T_world_needle
         return sim.stereo, left, right, T_true, priors, tissue
     finally:
-        for k, v in saved.items():
-            setattr(needle_task_scenes, k, v)
         sim.close()

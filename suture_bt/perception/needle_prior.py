@@ -82,11 +82,9 @@ class HeldPrior:
         circle (0 without a held place; modulo the base ↔ tip swap unless ``signed``)."""
         if self.arc_angle is None:
             return 0.0
-        theta = pinch_angle(self.pinch_point, T_world_needle)
-        d = abs(_wrap(theta - self.arc_angle))
-        if not signed:
-            d = min(d, abs(_wrap(theta - model.swapped_angle(self.arc_angle))))
-        return model.radius * d
+        T = np.asarray(T_world_needle, float)[None]
+        d = place_offsets(T, self.pinch_point, self.arc_angle, model, signed)[0]
+        return model.radius * abs(float(d))
 
     def miss(self, T_world_needle: np.ndarray, model: NeedleModel) -> float:
         """Distance from the pinch point to the arc over the tolerance, or the slide from the
@@ -111,15 +109,17 @@ class HeldPrior:
         )
 
 
-def _wrap(angle: float) -> float:
-    return float((angle + np.pi) % (2 * np.pi) - np.pi)
-
-
-def pinch_angle(point_world: np.ndarray, T_world_needle: np.ndarray) -> float:
-    """Angle (rad, needle frame) of a world point about the arc's centre, in the arc's plane."""
-    T = np.asarray(T_world_needle, float)
-    p = T[:3, :3].T @ (np.asarray(point_world, float) - T[:3, 3])
-    return float(np.arctan2(p[1], p[0]))
+def place_offsets(
+    T: np.ndarray, point: np.ndarray, arc_angle: float, model: NeedleModel, signed: bool = False
+) -> np.ndarray:
+    """Signed angles (K,) by which ``point`` sits on each pose's circle (K, 4, 4; point in
+    the poses' frame) past the arc angle ``arc_angle``: from that place, or, unless
+    ``signed``, from its base ↔ tip swap's when that is nearer."""
+    p = np.einsum("kji,kj->ki", T[:, :3, :3], np.asarray(point, float)[None] - T[:, :3, 3])
+    theta = np.arctan2(p[:, 1], p[:, 0])
+    places = (arc_angle,) if signed else (arc_angle, model.swapped_angle(arc_angle))
+    d = np.stack([(theta - a + np.pi) % (2 * np.pi) - np.pi for a in places])
+    return d[np.argmin(np.abs(d), axis=0), np.arange(len(theta))]
 
 
 def plane_crossings(

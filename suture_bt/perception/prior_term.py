@@ -20,7 +20,7 @@ import numpy as np
 from numba import njit
 
 from suture_bt.geometry import NeedleModel
-from suture_bt.perception.needle_prior import HeldPrior, NeedlePrior, PortPrior
+from suture_bt.perception.needle_prior import HeldPrior, NeedlePrior, PortPrior, place_offsets
 
 #: Pixels a miss of one tolerance counts as in the polish (about the spread of the edge
 #: residuals there), so a prior weighs like an edge point as well placed as its tolerance says.
@@ -50,11 +50,10 @@ class PriorTerm:
                 pts.append(T_cam_world[:3, :3] @ np.asarray(point, float) + T_cam_world[:3, 3])
                 tol.append(p.tolerance)
             if isinstance(p, HeldPrior) and p.arc_angle is not None:
-                a = float(p.arc_angle)
-                places.append((len(pts) - 1, a, model.swapped_angle(a), p.arc_tolerance))
+                places.append((len(pts) - 1, float(p.arc_angle), p.arc_tolerance))
         self.points = np.ascontiguousarray(np.array(pts, dtype=np.float64).reshape(-1, 3))
         self.tolerance = np.array(tol)
-        #: Held places: (index of the pinch point, arc angle, its swap's, tolerance along the arc).
+        #: Held places: (index of the pinch point, arc angle, tolerance along the arc).
         self.places = places
         self.model = model
         self._ends = np.stack([model.tip, model.base]).astype(np.float64)
@@ -74,11 +73,9 @@ class PriorTerm:
         """Each held place's signed slide (K, Q) over its tolerance: the pinch point's angle
         on the pose's circle from the held place, or from its swap's if that is nearer."""
         out = np.zeros((len(T), len(self.places)))
-        for j, (i, a, a_swapped, tol) in enumerate(self.places):
-            p = np.einsum("kji,kj->ki", T[:, :3, :3], self.points[i][None] - T[:, :3, 3])
-            theta = np.arctan2(p[:, 1], p[:, 0])
-            d = [(theta - b + np.pi) % (2 * np.pi) - np.pi for b in (a, a_swapped)]
-            out[:, j] = np.where(np.abs(d[0]) <= np.abs(d[1]), d[0], d[1]) * self.model.radius / tol
+        for j, (i, a, tol) in enumerate(self.places):
+            d = place_offsets(T, self.points[i], a, self.model)
+            out[:, j] = d * self.model.radius / tol
         return out
 
     def scaled(self, T: np.ndarray) -> np.ndarray:
