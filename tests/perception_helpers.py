@@ -41,10 +41,10 @@ def pose_errors(Ta: np.ndarray, Tb: np.ndarray) -> tuple[float, float]:
     return pos, ang
 
 
-def task_scene(name: str, i: int, seed: int = 6173):
+def task_scene(name: str, i: int, seed: int = 6173, masks: bool = False):
     """Development scene ``i`` of the needle benchmark's task set ``name`` (seed 6173, the
     tuning seed) rendered in the simulator: (stereo model, left, right, true T_cam_needle, task
-    priors, the phantom's tissue model)."""
+    priors, the phantom's tissue model; with ``masks``, the needle's true masks too)."""
     import sys
     from pathlib import Path
 
@@ -61,12 +61,13 @@ def task_scene(name: str, i: int, seed: int = 6173):
         rng = np.random.default_rng([seed, needle_pose.SETS.index(name), i])
         s, priors = needle_task_scenes.BUILDERS[name](sim, rng)
         sim.apply(s)
-        left, _ = sim.render("left", s, rng)
-        right, _ = sim.render("right", s, rng)
+        left, mask_left = sim.render("left", s, rng)
+        right, mask_right = sim.render("right", s, rng)
         ph = sim.world.task.phantom
         eye = sim.stereo.left.T_world_cam[:3, 3]
         tissue = phantom_tissue(ph, eye)
         T_true = invert(sim.stereo.left.T_world_cam) @ s.T_world_needle
-        return sim.stereo, left, right, T_true, priors, tissue
+        out = (sim.stereo, left, right, T_true, priors, tissue)
+        return (*out, (mask_left, mask_right)) if masks else out
     finally:
         sim.close()

@@ -1,6 +1,8 @@
 """The compiled edge loop agrees with the numpy edge objective: residuals, nearest angles and
 the robust normal equations, searched by grid or seeded, at feasible and infeasible poses."""
 
+from dataclasses import replace
+
 import numpy as np
 import pytest
 from test_pose_fit import _scene_1080p
@@ -11,6 +13,7 @@ from suture_bt.perception.edge_residuals import edge_jacobian, edge_rays, residu
 from suture_bt.perception.fit_solver import FD_STEPS, _irls_weights
 from suture_bt.perception.mask_view import edge_points
 from suture_bt.perception.needle_projection import params_to_pose, pose_to_params
+from suture_bt.perception.tissue_cut import TissueCut
 
 MODEL = NeedleModel()
 
@@ -70,3 +73,54 @@ def test_seeded_search_matches_and_residuals_alone_leave_the_system_empty():
     r12, _ = residuals(T, rays, MODEL, grid=12)
     rk12 = edge_normal_equations(T, None, FD_STEPS, rays, MODEL, 1.0, "cauchy", grid=12)[0]
     np.testing.assert_allclose(rk12[:-1], r12[:-1], atol=1e-6)
+
+
+def test_kernel_matches_the_numpy_objective_where_the_tissue_cuts_the_needle():
+    """A surface plane through the needle at 110° of arc, the base's side below it: rays
+    whose nearest arc point is hidden measure to the cut in both, and the cut's motion with
+    the pose enters both Jacobians (finite differences of different steps: looser)."""
+    rays, T, T6 = _poses_near_the_needle()
+    T, T6 = T[:-1], T6[:-1]
+    st, T_true, *_ = _scene_1080p(7, 0.0)
+    theta = np.radians(110.0)
+    point = T_true[:3, :3] @ MODEL.point_at(theta) + T_true[:3, 3]
+    normal = T_true[:3, :3] @ np.array([np.sin(theta), -np.cos(theta), 0.0])  # to the tip
+    rays.cut = TissueCut.from_ports([(point, normal)], np.eye(4), MODEL)
+    r, th = residuals(T, rays, MODEL)
+    r_whole, th_whole = residuals(T, replace(rays, cut=None), MODEL)
+    assert (th != th_whole).mean() > 0.05  # some rays measure to the cut
+    dT = (T6 - T[:, None]) / FD_STEPS[None, :, None, None]
+    J = edge_jacobian(T, dT, rays, MODEL, th)
+    w = _irls_weights(r, 1.0, "cauchy")
+    A = (J * w[:, None]) @ J.transpose(0, 2, 1)
+    g = ((J * w[:, None]) @ r[..., None])[..., 0]
+    rk, thk, _, Ak, gk = edge_normal_equations(T, T6, FD_STEPS, rays, MODEL, 1.0, "cauchy")
+    np.testing.assert_allclose(rk, r, atol=1e-6)
+    np.testing.assert_allclose(thk, th, atol=1e-10)
+    np.testing.assert_allclose(Ak, A, atol=1e-4 * np.abs(A).max())
+    np.testing.assert_allclose(gk, g, atol=1e-4 * np.abs(g).max())
+
+
+def test_the_cut_s_motion_with_the_pose_is_in_the_jacobian():
+    """For rays measured to the cut, the analytic derivative (the cut sliding along the arc
+    as the pose moves) matches the residuals' finite differences."""
+    rays, T, T6 = _poses_near_the_needle()
+    T, T6 = T[:-1], T6[:-1]
+    _, T_true, *_ = _scene_1080p(7, 0.0)
+    theta = np.radians(110.0)
+    point = T_true[:3, :3] @ MODEL.point_at(theta) + T_true[:3, 3]
+    normal = T_true[:3, :3] @ np.array([np.sin(theta), -np.cos(theta), 0.0])
+    rays.cut = TissueCut.from_ports([(point, normal)], np.eye(4), MODEL)
+    r, th = residuals(T, rays, MODEL)
+    _, th_whole = residuals(T, replace(rays, cut=None), MODEL)
+    at_cut = th != th_whole
+    dT = (T6 - T[:, None]) / FD_STEPS[None, :, None, None]
+    J = edge_jacobian(T, dT, rays, MODEL, th)
+    r6 = np.stack([residuals(T6[:, j], rays, MODEL)[0] for j in range(6)], 1)
+    numeric = (r6 - r[:, None]) / FD_STEPS[None, :, None]
+    ok = at_cut[:, None].repeat(6, 1) & np.isfinite(numeric)
+    err = np.abs(J - numeric)[ok] / (np.abs(numeric[ok]) + 1.0)
+    assert np.median(err) < 1e-3
+    without = edge_jacobian(T, dT, replace(rays, cut=None), MODEL, th)  # the cut held still
+    err_without = np.abs(without - numeric)[ok] / (np.abs(numeric[ok]) + 1.0)
+    assert np.median(err_without) > 10 * np.median(err)

@@ -7,6 +7,7 @@ from perception_helpers import pose_errors
 from test_pose_fit import MODEL, _scene_1080p, _tip_disc_hidden, _tip_hidden
 
 from suture_bt.perception.needle_prior import (
+    MAX_PRIOR_COST_RATIO,
     AcrossJawsPrior,
     HeldPrior,
     PortPrior,
@@ -15,6 +16,7 @@ from suture_bt.perception.needle_prior import (
     arc_distance,
     check_held_place,
     check_orientation,
+    choose_answer,
     plane_crossings,
 )
 from suture_bt.perception.pose_fit import NeedleNotFound, PoseFitter
@@ -82,6 +84,21 @@ def test_between_near_tied_twins_the_prior_not_the_cost_decides():
     assert pose_errors(res.T_cam_needle, free.T_cam_needle)[0] < 0.5
     with_prior, without = pose_errors(res.T_cam_needle, T), pose_errors(free.T_cam_needle, T)
     assert with_prior[0] < without[0] and with_prior[1] < without[1]
+
+
+def test_a_prior_chooses_among_poses_the_image_explains_almost_as_well_and_no_further():
+    """The answer is the cheapest pose the prior accepts, while it costs at most
+    MAX_PRIOR_COST_RATIO times the cheapest pose the fit found; a pose that agrees with the
+    prior but explains the image much worse is a refusal naming the prior."""
+    T = make_transform(np.eye(3), (0.01, 0.02, 0.1))
+    other = make_transform(np.eye(3), (0.03, 0.02, 0.1))  # 20 mm away
+    held = HeldPrior("psm1", _arc_point(other, 2.0), tolerance=0.002)
+    poses = np.stack([T, other])
+    b, ok, _ = choose_answer(poses, np.array([1.0, 1.1]), [held], MODEL)
+    assert b == 1 and ok.tolist() == [False, True]
+    with pytest.raises(PriorContradicted, match="worse than the best one") as exc:
+        choose_answer(poses, np.array([1.0, 1.05 * MAX_PRIOR_COST_RATIO]), [held], MODEL)
+    assert "psm1's pinch point" in exc.value.reason
 
 
 def test_port_and_predicted_pose_priors_choose_the_right_twin():

@@ -9,7 +9,7 @@ from suture_bt.perception.needle_prior import AcrossJawsPrior, HeldPrior, PortPr
 from suture_bt.perception.prior_seeds import SEED_PLACES, SEED_TURNS, seed_poses
 
 
-def test_seed_poses_pass_the_pinch_point_with_the_held_face_and_nearest_the_port():
+def test_seed_poses_pass_the_pinch_point_with_the_held_face_and_through_the_port():
     pinch = np.array([0.01, 0.02, 0.1])
     face = np.array([0.3, 0.2, -0.9])
     held = HeldPrior("psm1", pinch, 0.001)
@@ -22,8 +22,12 @@ def test_seed_poses_pass_the_pinch_point_with_the_held_face_and_nearest_the_port
     port_at = _arc_point(seeds[7], MODEL.tip_angle + 0.3)
     port = PortPrior("entry1", port_at, 0.003)
     near = seed_poses([held, jaws, port], MODEL)
-    assert len(near) == 4 * SEED_PLACES
-    assert min(port.miss(T, MODEL) for T in near) < 0.5
+    assert len(near) == 2 * SEED_PLACES  # the two circles through pinch and port
+    circle = [abs(np.linalg.norm(port_at - T[:3, 3]) - MODEL.radius) for T in near]
+    assert max(circle) < 1e-9  # every seed's circle passes through the port
+    assert min(port.miss(T, MODEL) for T in near) < 1e-6
+    beyond = PortPrior("entry1", held.pinch_point + 3 * MODEL.radius * np.array([1, 0, 0]), 0.003)
+    assert len(seed_poses([held, jaws, beyond], MODEL)) == 4 * SEED_PLACES  # the nearest turns
 
 
 def test_seeds_hold_the_needle_where_the_grasp_holds_it_when_the_prior_says():

@@ -17,6 +17,7 @@ from numba import njit, prange
 
 from suture_bt.geometry import NeedleModel
 from suture_bt.perception.edge_residuals import N_THETA_GRID, EdgeRays
+from suture_bt.perception.tissue_cut import clamp_to_seen
 
 _LOSS_CODES = {"cauchy": 0, "geman_mcclure": 1}
 
@@ -73,14 +74,18 @@ def _irls(r, sigma, loss):
 @njit(cache=True, parallel=True)
 def edge_system(
     T, T6, steps, origins, dirs, dz, focal, rad, wire, lo, hi, grid, theta_start,
-    cs_start, sigma, loss, want_system,
+    cs_start, sigma, loss, want_system, spans, dspans,
 ):  # fmt: skip
     """Residuals r (K, N), nearest angles θ (K, N) and their cos and sin (2, K, N) at poses T
     (K, 4, 4); with ``want_system``, also the normal equations A = Jᵀ W J (K, 6, 6) and
     g = Jᵀ W r (K, 6) of the robust loss (IRLS weights W), J by the poses T6 (K, 6, 4, 4)
     stepped by ``steps``. ``theta_start`` (K, N) with its cos and sin ``cs_start`` (2, K, N)
     seeds the Newton search (an empty array: grid search). Plain arrays and numbers, as
-    numba compiles them: :func:`edge_normal_equations` is the typed entry point."""
+    numba compiles them: :func:`edge_normal_equations` is the typed entry point.
+
+    ``spans`` (K, 2, 2; NaN: none) are the arc's spans the tissue hides (:mod:`tissue_cut`):
+    a ray whose nearest arc point is hidden measures to the span's seen end, which moves along
+    the arc with the pose by ``dspans`` (K, 6, 2, 2) per parameter."""
     K, N = T.shape[0], origins.shape[0]
     r = np.full((K, N), np.nan)
     theta = np.empty((K, N))
@@ -88,6 +93,7 @@ def edge_system(
     A = np.zeros((K, 6, 6))
     g = np.zeros((K, 6))
     seeded = theta_start.shape[0] == K
+    cut = spans.shape[0] == K
     gv = np.linspace(lo, hi, grid)
     gc, gs = np.cos(gv), np.sin(gv)
     for k in prange(K):  # poses are independent: the same bits on any number of threads
@@ -132,6 +138,11 @@ def edge_system(
                 th, c, s = _nearest_angle(
                     o0, o1, o2, d0, d1, d2, rad, lo, hi, gv, gc, gs, -1e9, 1.0, 0.0
                 )  # fmt: skip
+            cut_j, cut_e = -1, -1
+            if cut:
+                th_seen, cut_j, cut_e = clamp_to_seen(th, spans[k], lo, hi)
+                if cut_j >= 0:
+                    th, c, s = th_seen, math.cos(th_seen), math.sin(th_seen)
             theta[k, n], cs[0, k, n], cs[1, k, n] = th, c, s
             a0, a1 = rad * c - o0, rad * s - o1
             qd = a0 * d0 + a1 * d1 - o2 * d2
@@ -161,6 +172,8 @@ def edge_system(
                     + (M[j, 1, 0] * P0 + M[j, 1, 1] * P1 + b[j, 1]) * g1
                     + (M[j, 2, 0] * P0 + M[j, 2, 1] * P1 + b[j, 2]) * g2
                 )
+                if cut_j >= 0:  # the cut's end moves along the arc with the pose
+                    v += dspans[k, j, cut_j, cut_e] * (g1 * P0 - g0 * P1)
                 J[j] = v if math.isfinite(v) else 0.0
             for i in range(6):
                 wi = w * J[i]
@@ -176,6 +189,8 @@ def edge_system(
 
 _NO_START = np.zeros((0, 0))
 _NO_CS = np.zeros((2, 0, 0))
+_NO_SPANS = np.zeros((0, 2, 2))
+_NO_DSPANS = np.zeros((0, 6, 2, 2))
 
 
 def edge_normal_equations(
@@ -197,6 +212,14 @@ def edge_normal_equations(
         cs_start = np.stack([np.cos(theta_start), np.sin(theta_start)])
     K = len(T)
     want = T6 is not None
+    spans, dspans = _NO_SPANS, _NO_DSPANS
+    if rays.cut is not None:
+        if want:
+            spans, dspans = rays.cut.spans_and_derivatives(T, T6, steps)
+        else:
+            spans, dspans = rays.cut.spans(T), np.zeros((K, 6, 2, 2))
+        if not np.isfinite(spans).any():
+            spans, dspans = _NO_SPANS, _NO_DSPANS
     return edge_system(
         np.ascontiguousarray(T, dtype=float),
         np.ascontiguousarray(T6, dtype=float) if want else np.zeros((K, 6, 4, 4)),
@@ -215,4 +238,6 @@ def edge_normal_equations(
         float(sigma),
         _LOSS_CODES[loss],
         want,
+        spans,
+        dspans,
     )

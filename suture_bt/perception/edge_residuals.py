@@ -16,6 +16,7 @@ import numpy as np
 from suture_bt.geometry import NeedleModel
 from suture_bt.interfaces import StereoCameraModel
 from suture_bt.perception.needle_projection import pixel_rays
+from suture_bt.perception.tissue_cut import TissueCut, clamp_all
 from suture_bt.transforms import invert
 
 #: Samples of the arc angle for the nearest-point search before Newton polishing.
@@ -31,11 +32,24 @@ class EdgeRays:
     dz: np.ndarray  # (N,) z of the direction in its own eye frame
     focal: np.ndarray  # (N,) focal length of its eye (px)
     eye: np.ndarray  # (N,) 0 left, 1 right
+    #: Where the tissue hides the arc (a needle in a port): rays measure to the seen arc.
+    cut: TissueCut | None = None
 
     def subset(self, idx: np.ndarray) -> EdgeRays:
         return EdgeRays(
-            self.origins[idx], self.dirs[idx], self.dz[idx], self.focal[idx], self.eye[idx]
+            self.origins[idx],
+            self.dirs[idx],
+            self.dz[idx],
+            self.focal[idx],
+            self.eye[idx],
+            self.cut,
         )
+
+    def spans(self, T: np.ndarray) -> np.ndarray:
+        """Hidden spans (K, 2, 2) of the arc at poses T (all NaN without a cut)."""
+        if self.cut is None:
+            return np.full((len(T), 2, 2), np.nan)
+        return self.cut.spans(T)
 
     def __len__(self) -> int:
         return len(self.dz)
@@ -145,11 +159,24 @@ def residuals(
     o, d = _to_needle(T, rays)
     if theta is None:
         theta = nearest_arc_angle(o, d, model, grid=grid, start=theta_start)
+        if rays.cut is not None:
+            theta, _ = _to_seen(theta, rays.spans(T), model)
     f, qd = _arc_f(theta, o, d, model.radius)
     dist = np.sqrt(np.maximum(f, 0.0))
     depth = qd * rays.dz[None]
     r = (dist - model.wire_radius) * rays.focal[None] / np.where(depth > 1e-6, depth, np.nan)
     return r, theta
+
+
+def _to_seen(theta: np.ndarray, spans: np.ndarray, model: NeedleModel):
+    """Angles (K, N) moved out of the hidden spans (K, 2, 2) to their seen ends, and which
+    span end each sits at (2·span + end; -1: not moved)."""
+    return clamp_all(
+        np.ascontiguousarray(theta, dtype=float),
+        np.ascontiguousarray(spans, dtype=float),
+        float(model.tip_angle),
+        float(model.base_angle),
+    )
 
 
 def edge_jacobian(
@@ -171,9 +198,9 @@ def edge_jacobian(
     """
     o, d = _to_needle(T, rays)
     c, s = np.cos(theta), np.sin(theta)
-    a0, a1 = model.radius * c - o[0], model.radius * s - o[1]
+    P = [model.radius * c, model.radius * s]
+    a0, a1 = P[0] - o[0], P[1] - o[1]
     qd = a0 * d[0] + a1 * d[1] - o[2] * d[2]
-    P = (model.radius * c, model.radius * s)
     a = (a0, a1, -o[2])
     e = [a[i] - qd * d[i] for i in range(3)]
     dist = np.sqrt(e[0] * e[0] + e[1] * e[1] + e[2] * e[2])
@@ -185,4 +212,16 @@ def edge_jacobian(
     R = T[:, :3, :3]
     A = np.einsum("kmi,kjmn->kjin", R, dT[..., :3, :2]).reshape(*dT.shape[:2], 6)
     b = np.einsum("kmi,kjm->kji", R, dT[..., :3, 3])
-    return np.concatenate([A, b], -1) @ H
+    J = np.concatenate([A, b], -1) @ H
+    if rays.cut is not None:
+        # A ray measured to the cut: the cut's end moves along the arc with the pose.
+        spans = rays.spans(T).reshape(len(T), 4)
+        at = np.stack([np.isclose(theta, spans[:, j, None], rtol=0, atol=1e-12) for j in range(4)])
+        if at.any():
+            h = 1e-7
+            Tp = (T[:, None] + h * dT).reshape(-1, 4, 4)
+            moved = (rays.spans(Tp).reshape(*dT.shape[:2], 4) - spans[:, None]) / h
+            moved = np.where(np.isfinite(moved), moved, 0.0)  # (K, P, 4)
+            dth = np.einsum("jkn,kpj->kpn", at.astype(float), moved)  # (K, P, N)
+            J += dth * (g[1] * P[0] - g[0] * P[1])[:, None]
+    return J

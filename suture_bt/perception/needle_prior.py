@@ -24,10 +24,12 @@ tip choice is made later from colour, so the pose prior's angle is taken modulo 
 
 from __future__ import annotations
 
+import math
 from collections.abc import Sequence
 from dataclasses import dataclass
 
 import numpy as np
+from numba import njit
 
 from suture_bt.geometry import NeedleModel
 from suture_bt.perception.refusal import NeedleNotFound
@@ -115,11 +117,32 @@ def place_offsets(
     """Signed angles (K,) by which ``point`` sits on each pose's circle (K, 4, 4; point in
     the poses' frame) past the arc angle ``arc_angle``: from that place, or, unless
     ``signed``, from its base ↔ tip swap's when that is nearer."""
-    p = np.einsum("kji,kj->ki", T[:, :3, :3], np.asarray(point, float)[None] - T[:, :3, 3])
-    theta = np.arctan2(p[:, 1], p[:, 0])
     places = (arc_angle,) if signed else (arc_angle, model.swapped_angle(arc_angle))
-    d = np.stack([(theta - a + np.pi) % (2 * np.pi) - np.pi for a in places])
-    return d[np.argmin(np.abs(d), axis=0), np.arange(len(theta))]
+    return _place_offsets(
+        np.ascontiguousarray(T, dtype=np.float64),
+        np.asarray(point, dtype=np.float64),
+        np.array(places, dtype=np.float64),
+    )
+
+
+@njit(cache=True)
+def _place_offsets(T, point, places):
+    """:func:`place_offsets` compiled (the fit calls it on small batches many times)."""
+    K = T.shape[0]
+    out = np.empty(K)
+    for k in range(K):
+        x = y = 0.0
+        for m in range(3):
+            x += T[k, m, 0] * (point[m] - T[k, m, 3])
+            y += T[k, m, 1] * (point[m] - T[k, m, 3])
+        theta = math.atan2(y, x)
+        best = np.inf
+        for a in places:
+            d = (theta - a + math.pi) % (2 * math.pi) - math.pi
+            if abs(d) < abs(best):
+                best = d
+        out[k] = best
+    return out
 
 
 def plane_crossings(
@@ -145,7 +168,9 @@ class PortPrior:
     within ``tolerance`` of the port: an arc that only ends at the port (its hidden part
     turned back out of the tissue, the edge-on twin of a needle in a port) is not in it. The
     needle's part below every given port's surface plane may then be hidden by the tissue
-    (:mod:`unseen_arc`); without a normal the tissue hides nothing."""
+    (:mod:`unseen_arc`), and the fit measures the outline to the arc's seen part, whose end
+    at the port is where the tissue cuts it (:mod:`tissue_cut`); without a normal the tissue
+    hides nothing."""
 
     port: str
     point: np.ndarray
@@ -268,19 +293,40 @@ def contradiction(priors: Sequence[NeedlePrior], misses: np.ndarray) -> PriorCon
     return PriorContradicted("; ".join(parts))
 
 
+#: The answer a prior chooses may cost at most this much more than the cheapest pose the fit
+#: found (which the prior refuses); beyond it the image says the prior is wrong. The
+#: development task sets with priors (seeds 6173 and 1000, 320 calls) answer the cheapest pose
+#: in every call but one, a needle in a port whose true grasp sat at the edge of the held
+#: place's tolerance: its only consistent pose cost 2.3× the (refused) true one and was
+#: 7.4° off.
+MAX_PRIOR_COST_RATIO = 1.2
+
+
 def choose_answer(
     T_world: np.ndarray, costs: np.ndarray, priors: Sequence[NeedlePrior], model: NeedleModel
 ) -> tuple[int, np.ndarray, np.ndarray | None]:
     """The answer among polished poses (K, 4, 4): the best-cost one consistent with every
-    prior (none consistent: :class:`PriorContradicted`), which poses may answer, and the
-    misses (K, P; None without priors)."""
+    prior, which poses may answer, and the misses (K, P; None without priors).
+    :class:`PriorContradicted` when none is consistent, or when the consistent ones all cost
+    more than MAX_PRIOR_COST_RATIO times the cheapest pose (the image contradicts the prior)."""
     if not priors:
         return int(np.argmin(costs)), np.isfinite(costs), None
     misses = prior_misses(priors, T_world, model)
-    ok = consistent(misses) & np.isfinite(costs)
+    finite = np.isfinite(costs)
+    ok = consistent(misses) & finite
     if not ok.any():
-        raise contradiction(priors, misses[np.isfinite(costs)])
-    return int(np.argmin(np.where(ok, costs, np.inf))), ok, misses
+        raise contradiction(priors, misses[finite])
+    b = int(np.argmin(np.where(ok, costs, np.inf)))
+    cheapest = int(np.argmin(np.where(finite, costs, np.inf)))
+    ratio = float(costs[b] / costs[cheapest]) if costs[cheapest] > 0 else 1.0
+    if ratio > MAX_PRIOR_COST_RATIO:
+        why = contradiction(priors, misses[cheapest : cheapest + 1]).reason
+        raise PriorContradicted(
+            f"the poses that agree with the priors explain the image {ratio:.1f}× worse than "
+            f"the best one (limit {MAX_PRIOR_COST_RATIO:.1f}×), which the priors refuse "
+            f"({why}): the image contradicts them"
+        )
+    return b, ok, misses
 
 
 def with_consistent(

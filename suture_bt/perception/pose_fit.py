@@ -72,6 +72,7 @@ from suture_bt.perception.rival_probe import (
     slide_starts,
     tie_ratio,
 )
+from suture_bt.perception.tissue_cut import TissueCut
 
 #: A clearly different second-stage pose costing at most this much more than the best also
 #: seeds the second search (1.3 gave the same answers on the benchmarks for 10 ms more).
@@ -161,8 +162,10 @@ class PoseFitter:
         ``priors`` (:mod:`needle_prior`: held by an arm, in a port, a predicted pose) choose
         among the final candidates: the second search from the best pose's own ends always runs
         (it reaches the mirror twin), the best consistent second-stage pose joins the polish,
-        and the answer is the best-cost consistent polished pose; none consistent raises
-        :class:`PriorContradicted` naming the prior. Without priors nothing changes.
+        and the answer is the best-cost consistent polished pose; none consistent (or none
+        within MAX_PRIOR_COST_RATIO of the cheapest) raises :class:`PriorContradicted` naming
+        the prior. Ports given with their surface normals hide the arc below them: the edge
+        rays measure to its seen part (:mod:`tissue_cut`). Without priors nothing changes.
         """
         rng = np.random.default_rng(self.seed)
         el, er = edge_points(left), edge_points(right)
@@ -174,6 +177,9 @@ class PoseFitter:
         el = subsample(el, self.max_points_per_eye, rng)
         er = subsample(er, self.max_points_per_eye, rng)
         rays = edge_rays(self.stereo, el, er)
+        # A needle in a port: the tissue hides the arc below the port's surface.
+        ports = [(p.point, p.normal) for p in priors if getattr(p, "normal", None) is not None]
+        rays.cut = TissueCut.from_ports(ports, self.stereo.left.T_cam_world, self.model)
         nl = len(el)
         coarse = rays.subset(balanced(nl, len(er), self.coarse_points_per_eye, rng))
         mid = rays.subset(balanced(nl, len(er), self.mid_points_per_eye, rng))

@@ -47,11 +47,16 @@ def seed_poses(priors: Sequence[NeedlePrior], model: NeedleModel) -> np.ndarray:
     turns = np.linspace(0.0, 2 * np.pi, SEED_TURNS, endpoint=False)
     ports = [p for p in priors if isinstance(p, PortPrior)]
     if ports:
-        centres = pinch - model.radius * (np.cos(turns)[:, None] * e0 + np.sin(turns)[:, None] * e1)
-        miss = [
-            abs(np.linalg.norm(np.cross(ports[0].point - c, z)) - model.radius) for c in centres
-        ]
-        turns = turns[np.argsort(miss)[:4]]
+        turns = _turns_through(ports[0].point - pinch, e0, e1, model.radius)
+        if not len(turns):  # the port lies beyond the circle's reach: the nearest turns
+            turns = np.linspace(0.0, 2 * np.pi, SEED_TURNS, endpoint=False)
+            centres = pinch - model.radius * (
+                np.cos(turns)[:, None] * e0 + np.sin(turns)[:, None] * e1
+            )
+            miss = [
+                abs(np.linalg.norm(np.cross(ports[0].point - c, z)) - model.radius) for c in centres
+            ]
+            turns = turns[np.argsort(miss)[:4]]
     held_at = held[faces[0].arm].arc_angle
     if held_at is None:
         places = np.linspace(model.tip_angle, model.base_angle, SEED_PLACES + 2)[1:-1]
@@ -67,3 +72,15 @@ def seed_poses(priors: Sequence[NeedlePrior], model: NeedleModel) -> np.ndarray:
     out[:, :3, 3] = pinch - model.radius * radial
     out[:, 3, 3] = 1.0
     return out
+
+
+def _turns_through(q: np.ndarray, e0: np.ndarray, e1: np.ndarray, radius: float) -> np.ndarray:
+    """Turns ψ (0-2) of the radial at the pinch whose circle (in the plane e0, e1 through the
+    pinch, centre at -radius·(cos ψ e0 + sin ψ e1)) passes through the point ``q`` (from the
+    pinch) projected onto that plane: |q + radius·u(ψ)| = radius."""
+    a, b = float(q @ e0), float(q @ e1)
+    d = np.hypot(a, b)
+    if d < 1e-9 or d > 2 * radius:
+        return np.zeros(0)
+    phi, half = np.arctan2(b, a), np.arccos(-d / (2 * radius))
+    return np.array([phi + half, phi - half])
