@@ -109,6 +109,22 @@ def test_keypoints_farther_apart_than_the_needle_can_appear_keep_only_the_strong
     np.testing.assert_array_equal(loc._plausible(kp, far_weak), far_weak)
 
 
+def test_of_two_keypoints_too_far_apart_the_one_on_a_speck_is_dropped_even_if_stronger():
+    """The stronger keypoint may sit on another instrument's jaw tip (a speck of the coarse
+    mask) and the weaker on the needle's arc (a long blob): the speck's is dropped."""
+    loc = NeedleLocalizer(stereo(1920, 1080), net=_eager_net())
+    kp = np.array([[[830.0, 220.0], [1750.0, 220.0]], [[800.0, 220.0], [900.0, 230.0]]])
+    score = np.array([[0.3, 0.8], [0.6, 0.7]])
+    scale = 8.0
+    prob = np.zeros((2, 136, 240))
+    (u0, v0), (u1, v1) = np.rint((kp[0] + 0.5) / scale - 0.5).astype(int)
+    prob[0, v1 - 1 : v1 + 2, u1 - 1 : u1 + 2] = 0.9  # a 3×3 speck under the stronger
+    prob[0, v0 - 1 : v0 + 2, u0 - 1 : u0 + 25] = 0.9  # an arc-long blob under the weaker
+    out = loc._plausible(kp, score, prob, scale)
+    np.testing.assert_array_equal(out, [[0.3, 0.0], [0.6, 0.7]])
+    np.testing.assert_array_equal(loc._plausible(kp, score), [[0.0, 0.8], [0.6, 0.7]])
+
+
 def test_without_priors_the_spread_limit_is_tighter_and_a_pinned_holder_loosens_it():
     """Nothing but the image checks the plane of an answer given without priors; a calibrated
     held-by prior pins a point of the arc and allows a looser spread."""

@@ -193,16 +193,41 @@ class NeedleLocalizer:
         kp_full = ((kp + 0.5) * OUTPUT_STRIDE) / s - 0.5
         return prob, kp_full, score, OUTPUT_STRIDE / s
 
-    def _plausible(self, kp: np.ndarray, score: np.ndarray) -> np.ndarray:
-        """Scores with the weaker keypoint of an eye zeroed when the two are farther apart than
-        the needle's chord can appear (at the nearest working distance): one of them then sits
-        on something else, e.g. a jaw tip, and would pick the wrong blob as the needle."""
+    def _plausible(
+        self, kp: np.ndarray, score: np.ndarray, prob: np.ndarray | None = None, scale=1.0
+    ) -> np.ndarray:
+        """Scores with one keypoint of an eye zeroed when the two are farther apart than the
+        needle's chord can appear (at the nearest working distance): one of them then sits on
+        something else, e.g. a jaw tip, and would pick the wrong blob as the needle. The one
+        dropped lies on the smaller blob of the coarse mask ``prob`` (``scale``: full px per
+        coarse px) — a jaw tip is a speck beside the needle's arc — or, on a tie or without
+        ``prob``, is the weaker (development in_port #16 of seed 1000: the stronger, 0.41
+        against 0.17, sat on the other arm's jaw tip)."""
         max_px = MAX_CHORD_MARGIN * self.model.chord * self.stereo.left.fx / NEAR_UNMEASURED
         out = score.copy()
         for eye in (0, 1):
             if out[eye].min() >= MIN_KEYPOINT_SCORE:
                 if np.linalg.norm(kp[eye, 0] - kp[eye, 1]) > max_px:
-                    out[eye, int(np.argmin(out[eye]))] = 0.0
+                    areas = None if prob is None else self._blob_areas(prob[eye], kp[eye], scale)
+                    if areas is None or areas[0] == areas[1]:
+                        out[eye, int(np.argmin(out[eye]))] = 0.0
+                    else:
+                        out[eye, int(np.argmin(areas))] = 0.0
+        return out
+
+    def _blob_areas(self, prob: np.ndarray, kp: np.ndarray, scale: float) -> np.ndarray:
+        """Area (coarse px) of the coarse mask's blob each keypoint (2, 2; full px) lies on
+        (0: on none)."""
+        m = (prob > self.coarse_threshold).astype(np.uint8)
+        _, lab, stats, _ = cv2.connectedComponentsWithStats(m, connectivity=8)
+        out = np.zeros(len(kp))
+        h, w = lab.shape
+        for i, (u, v) in enumerate((np.asarray(kp, float) + 0.5) / scale - 0.5):
+            x, y = int(round(u)), int(round(v))
+            win = lab[max(y - 2, 0) : min(y + 3, h), max(x - 2, 0) : min(x + 3, w)]
+            labels = win[win > 0]
+            if len(labels):
+                out[i] = stats[labels, cv2.CC_STAT_AREA].max()
         return out
 
     def _ends_and_depth(self, kp: np.ndarray, score: np.ndarray):
@@ -257,7 +282,7 @@ class NeedleLocalizer:
         prob, kp, raw_score, scale = self.network(left, right)
         self.last_network = (prob, scale)
         t1 = time.perf_counter()
-        score = self._plausible(kp, raw_score)
+        score = self._plausible(kp, raw_score, prob, scale)
         ends, depth = self._ends_and_depth(kp, score)
         # The needle's coarse blob is the one at the trusted end keypoints (coarse px).
         anchors = [(kp[e][score[e] >= MIN_KEYPOINT_SCORE] + 0.5) / scale - 0.5 for e in (0, 1)]
