@@ -98,7 +98,7 @@ def test_a_prior_chooses_among_poses_the_image_explains_almost_as_well_and_no_fu
     assert b == 1 and ok.tolist() == [False, True]
     with pytest.raises(PriorContradicted, match="worse than the best one") as exc:
         choose_answer(poses, np.array([1.0, 1.05 * MAX_PRIOR_COST_RATIO]), [held], MODEL)
-    assert "psm1's pinch point" in exc.value.reason
+    assert "misses the held-by prior of psm1 by" in exc.value.reason
 
 
 def test_port_and_predicted_pose_priors_choose_the_right_twin():

@@ -194,7 +194,11 @@ class NeedleLocalizer:
         return prob, kp_full, score, OUTPUT_STRIDE / s
 
     def _plausible(
-        self, kp: np.ndarray, score: np.ndarray, prob: np.ndarray | None = None, scale=1.0
+        self,
+        kp: np.ndarray,
+        score: np.ndarray,
+        prob: np.ndarray | None = None,
+        scale: float = 1.0,
     ) -> np.ndarray:
         """Scores with one keypoint of an eye zeroed when the two are farther apart than the
         needle's chord can appear (at the nearest working distance): one of them then sits on

@@ -320,13 +320,28 @@ def choose_answer(
     cheapest = int(np.argmin(np.where(finite, costs, np.inf)))
     ratio = float(costs[b] / costs[cheapest]) if costs[cheapest] > 0 else 1.0
     if ratio > MAX_PRIOR_COST_RATIO:
-        why = contradiction(priors, misses[cheapest : cheapest + 1]).reason
+        missed = ", ".join(
+            f"{_label(p)} by {m:.1f}×"
+            for p, m in zip(priors, misses[cheapest], strict=True)
+            if m > 1
+        )
         raise PriorContradicted(
             f"the poses that agree with the priors explain the image {ratio:.1f}× worse than "
-            f"the best one (limit {MAX_PRIOR_COST_RATIO:.1f}×), which the priors refuse "
-            f"({why}): the image contradicts them"
+            f"the best one (limit {MAX_PRIOR_COST_RATIO:.1f}×), which misses {missed}: the "
+            "image contradicts the priors"
         )
     return b, ok, misses
+
+
+def _label(p: NeedlePrior) -> str:
+    """A prior named for a refusal's reason."""
+    if isinstance(p, HeldPrior):
+        return f"the held-by prior of {p.arm}"
+    if isinstance(p, PortPrior):
+        return f"port {p.port}"
+    if isinstance(p, AcrossJawsPrior):
+        return f"the face across {p.arm}'s jaws"
+    return p.source
 
 
 def with_consistent(
