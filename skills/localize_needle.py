@@ -14,28 +14,27 @@ import numpy as np
 
 from suture_bt.calibration.calibration_pose import offset_box_points
 from suture_bt.kinematics import UnreachablePoseError, inverse_kinematics
-from suture_bt.perception.in_hand import BLADE_Z_RANGE, JAW_POINT_IN_TIP, estimate_in_hand
+from suture_bt.perception.in_hand import estimate_in_hand
 from suture_bt.perception.needle_prior import AcrossJawsPrior
 from suture_bt.planning import to_base
 from suture_bt.skills import presentation, second_view
 from suture_bt.skills.base import Skill, SkillFailure, Waiting
 from suture_bt.skills.context import NeedleBelief, NeedleNotSeen, NeedleObservation, TaskContext
 from suture_bt.skills.grasp_offset import offset_from_grasp
+from suture_bt.skills.held_priors import (  # noqa: F401 - the limits, re-exported
+    ACROSS_JAWS_DEG,
+    ACROSS_JAWS_DEG_CALIBRATED,
+    HOLD_MARGIN_UNCALIBRATED,
+    HOLD_TOLERANCE_CALIBRATED,
+    PINCH_TO_BLADE_END,
+    held_priors,
+    hold_tolerance,
+)
 from suture_bt.skills.line_of_sight import make_way
 from suture_bt.skills.motion import move_joints, move_to, together
 from suture_bt.skills.offset_evidence import offset_grid, seen_offsets, unseen_offsets
-from suture_bt.skills.tip_uncertainty import worst_offset_displacement
 from suture_bt.transforms import invert
 
-#: A held needle's wire must pass this close to the holder's blades (m; anywhere along the
-#: stretch that holds it, ``in_hand.BLADE_Z_RANGE``) once the arm is calibrated; before, the
-#: margin adds the tip displacement of the largest hidden joint
-#: offset the task allows (SRC: 5°, 5°, 5 mm) at the arm's present joints.
-HOLD_TOLERANCE_CALIBRATED = 0.002
-HOLD_MARGIN_UNCALIBRATED = 0.004
-#: The localiser's held-by prior measures from the pinch point (``JAW_POINT_IN_TIP``); the
-#: wire may sit anywhere along the blades (``BLADE_Z_RANGE``), up to this much deeper (m).
-PINCH_TO_BLADE_END = float(JAW_POINT_IN_TIP[2] - BLADE_Z_RANGE[0])
 #: Presentation poses tried before giving up; more for an uncalibrated holder, whose answers
 #: need a second view to agree (a report trial's preparation ended after 7: two answers, one
 #: unconfirmed, one with its plane 27° from across the jaws, five refusals).
@@ -46,19 +45,6 @@ MAX_PRESENTATIONS_UNCALIBRATED = 12
 #: pose (whole circle). A confidently wrong first estimate (a twin sharing the tip, seen on
 #: a campaign trial: 24 mm off at the base) otherwise aims every presentation wrongly.
 DOUBT_AFTER = 3
-#: A needle driver holds the needle with its jaws across the needle plane (every grasp of the
-#: task: the plane's normal along the tip's z axis; needle z against it, but for a needle
-#: picked up turned over, whose belief says so); an uncalibrated arm's tip is turned by
-#: up to ~7° by its hidden offset and a slip tilts the needle by up to 10° (harsh profile).
-#: The localiser's confident twins at the Task 3 start had their plane 39-45° off (dev trial
-#: 8130007): they passed the loose held-by test of an uncalibrated arm, not this one (deg).
-ACROSS_JAWS_DEG = 20.0
-#: The same for a calibrated holder: its tip is where its joints say, but slips may have
-#: tilted the needle in the jaw (harsh profile: up to 10° each). Either limit also goes to the
-#: localiser as a prior (:class:`~suture_bt.perception.needle_prior.AcrossJawsPrior`): its
-#: signed test refuses a mirror twin (136-163° off at the Task 3 start's presentations), and it
-#: tells base from tip when the swage band does not show.
-ACROSS_JAWS_DEG_CALIBRATED = 30.0
 #: Share of the offset bound still possible around a provisional offset from the grasp
 #: (dev fits with 0.2 mm / 1° estimate noise: within 0.2° and 0.2 mm of the true offset).
 PROVISIONAL_SHARE = 0.4
@@ -320,15 +306,9 @@ class LocalizeNeedle(Skill):
         held = {}  # the task priors of a held needle, for the localiser
         if self.holder is not None:
             arm = ctx.arm(self.holder)
-            tol, tip = self._hold_tolerance(arm), arm.tip_world()
-            jaw_deg = ACROSS_JAWS_DEG_CALIBRATED if arm.calibrated else ACROSS_JAWS_DEG
-            face = self._held_face(tip)
-            held = {
-                "holder": (arm.name, tip),
-                "holder_tolerance": tol + PINCH_TO_BLADE_END,
-                "jaw_tolerance_deg": jaw_deg,
-                "held_face": face,
-            }
+            held = held_priors(ctx, self.holder)
+            tol, tip = hold_tolerance(arm), held["holder"][1]
+            jaw_deg, face = held["jaw_tolerance_deg"], held["held_face"]
         try:
             obs = ctx.sensor.observe(previous, **held)
         except NeedleNotSeen as e:
@@ -373,23 +353,6 @@ class LocalizeNeedle(Skill):
         if not arm.calibrated:
             q = arm.servo.estimated_jp().copy()
             self._evidence.append((q, unseen_eye, self.context.sensor.seen_pixels()))
-
-    def _held_face(self, T_world_tip: np.ndarray) -> np.ndarray:
-        """The needle's z axis (world) as the holder's grasp holds it: the believed in-hand
-        pose's, else against the tip's z axis (the hand of the Task 3 start, of a handover and
-        of a pick-up from a needle lying face up; only a needle picked up turned over is held
-        the other way, and its belief says so)."""
-        b = self.context.belief
-        if b is not None and b.holder == self.holder and b.T_tip_needle is not None:
-            return T_world_tip[:3, :3] @ np.asarray(b.T_tip_needle)[:3, 2]
-        return -T_world_tip[:3, 2]
-
-    @staticmethod
-    def _hold_tolerance(arm) -> float:
-        """How far (m) the wire may pass from ``arm``'s pinch point as its joints give it."""
-        if arm.calibrated:
-            return HOLD_TOLERANCE_CALIBRATED
-        return HOLD_MARGIN_UNCALIBRATED + worst_offset_displacement(arm.servo.estimated_jp())
 
     def _adopt(self, obs: NeedleObservation) -> None:
         if self.confirmed:
