@@ -57,8 +57,8 @@ from suture_bt.skills.grasps import (
     tip_goal,
 )
 from suture_bt.skills.handover import STANDBY
+from suture_bt.skills.held_priors import ACROSS_JAWS_DEG_CALIBRATED
 from suture_bt.skills.line_of_sight import clear_tip_pose
-from suture_bt.skills.localize_needle import ACROSS_JAWS_DEG_CALIBRATED
 from suture_bt.skills.needle_sensor import HELD_PLACE_TOL
 
 TASK_SETS = ("held_start", "held_presented", "in_port", "handover")

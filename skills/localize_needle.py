@@ -21,15 +21,7 @@ from suture_bt.skills import presentation, second_view
 from suture_bt.skills.base import Skill, SkillFailure, Waiting
 from suture_bt.skills.context import NeedleBelief, NeedleNotSeen, NeedleObservation, TaskContext
 from suture_bt.skills.grasp_offset import offset_from_grasp
-from suture_bt.skills.held_priors import (  # noqa: F401 - the limits, re-exported
-    ACROSS_JAWS_DEG,
-    ACROSS_JAWS_DEG_CALIBRATED,
-    HOLD_MARGIN_UNCALIBRATED,
-    HOLD_TOLERANCE_CALIBRATED,
-    PINCH_TO_BLADE_END,
-    held_priors,
-    hold_tolerance,
-)
+from suture_bt.skills.held_priors import held_priors, hold_tolerance
 from suture_bt.skills.line_of_sight import make_way
 from suture_bt.skills.motion import move_joints, move_to, together
 from suture_bt.skills.offset_evidence import offset_grid, seen_offsets, unseen_offsets

@@ -13,8 +13,8 @@ from suture_bt.skills import localize_needle
 from suture_bt.skills.base import SkillStatus
 from suture_bt.skills.context import NeedleBelief, NeedleObservation, TaskContext
 from suture_bt.skills.grasps import hand
+from suture_bt.skills.held_priors import ACROSS_JAWS_DEG
 from suture_bt.skills.localize_needle import (
-    ACROSS_JAWS_DEG,
     DOUBT_AFTER,
     LocalizeNeedle,
     across_jaws_deg,

@@ -16,6 +16,7 @@ import numpy as np
 from suture_bt.geometry import NeedleModel
 from suture_bt.interfaces import StereoCameraModel
 from suture_bt.perception.colour_refine import ColourRule
+from suture_bt.perception.needle_prior import port_planes
 from suture_bt.perception.refusal import NeedleNotFound
 from suture_bt.perception.unseen_arc import ArcExposure, arc_exposure, below_port_planes
 
@@ -73,7 +74,7 @@ class ExposureGate:
         ``max_exposed`` (m) with no needle and nothing in front of it, wire both see lies
         deep in the tissue, or an eye sees less than ``min_seen`` (m) of the arc.
         ``priors``' ports (with normals) may hide the wire below them."""
-        ports = [(p.point, p.normal) for p in priors if getattr(p, "normal", None) is not None]
+        ports = port_planes(priors)
         inside, tissue_hides = self.tissue, self.tissue is None and not ports
         if ports:
             planes = below_port_planes(ports)

@@ -267,6 +267,13 @@ class AcrossJawsPrior:
 NeedlePrior = HeldPrior | PortPrior | PredictedPosePrior | AcrossJawsPrior
 
 
+def port_planes(priors: Sequence[NeedlePrior]) -> list[tuple[np.ndarray, np.ndarray]]:
+    """(point, outward normal) of every port prior given with its surface normal (world): where
+    the tissue may hide the needle."""
+    ports = [p for p in priors if isinstance(p, PortPrior) and p.normal is not None]
+    return [(p.point, p.normal) for p in ports]
+
+
 def prior_misses(
     priors: Sequence[NeedlePrior], T_world: np.ndarray, model: NeedleModel
 ) -> np.ndarray:

@@ -56,7 +56,12 @@ from suture_bt.perception.fit_terms import (  # noqa: F401 - re-exported
     FreeSpaceTerm,
 )
 from suture_bt.perception.mask_view import MaskView, edge_points
-from suture_bt.perception.needle_prior import NeedlePrior, choose_answer, with_consistent
+from suture_bt.perception.needle_prior import (
+    NeedlePrior,
+    choose_answer,
+    port_planes,
+    with_consistent,
+)
 from suture_bt.perception.needle_projection import (
     end_pixels,
     params_to_pose,
@@ -178,7 +183,7 @@ class PoseFitter:
         er = subsample(er, self.max_points_per_eye, rng)
         rays = edge_rays(self.stereo, el, er)
         # A needle in a port: the tissue hides the arc below the port's surface.
-        ports = [(p.point, p.normal) for p in priors if getattr(p, "normal", None) is not None]
+        ports = port_planes(priors)
         rays.cut = TissueCut.from_ports(ports, self.stereo.left.T_cam_world, self.model)
         nl = len(el)
         coarse = rays.subset(balanced(nl, len(er), self.coarse_points_per_eye, rng))
