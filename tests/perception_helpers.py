@@ -42,8 +42,8 @@ def pose_errors(Ta: np.ndarray, Tb: np.ndarray) -> tuple[float, float]:
 
 
 def task_scene(name: str, i: int, seed: int = 6173, masks: bool = False):
-    """Development scene ``i`` of the needle benchmark's task set ``name`` (seed 6173, the
-    tuning seed) rendered in the simulator: (stereo model, left, right, true T_cam_needle, task
+    """Development scene ``i`` of the needle benchmark's set ``name`` (seed 6173, the tuning
+    seed, by default) rendered in the simulator: (stereo model, left, right, true T_cam_needle, task
     priors, the phantom's tissue model; with ``masks``, the needle's true masks too)."""
     import sys
     from pathlib import Path
@@ -59,9 +59,13 @@ def task_scene(name: str, i: int, seed: int = 6173, masks: bool = False):
     sim = SimScene(1920, 1080)
     try:
         rng = np.random.default_rng([seed, needle_pose.SETS.index(name), i])
-        s, priors = needle_task_scenes.BUILDERS[name](sim, rng)
-        sim.apply(s)
-        left, mask_left = sim.render("left", s, rng)
+        if name in needle_task_scenes.BUILDERS:
+            s, priors = needle_task_scenes.BUILDERS[name](sim, rng)
+            sim.apply(s)
+            left, mask_left = sim.render("left", s, rng)
+        else:  # the random sets (unoccluded, occluded): no task priors, no left mask
+            s, left, _, _ = needle_pose._draw_scene(sim, name, rng, i)
+            priors, mask_left = [], None
         right, mask_right = sim.render("right", s, rng)
         ph = sim.world.task.phantom
         eye = sim.stereo.left.T_world_cam[:3, 3]

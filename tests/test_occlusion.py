@@ -11,7 +11,7 @@ from suture_bt.perception.occlusion import (
     with_occluder,
     without_occluder_rims,
 )
-from suture_bt.perception.pose_fit import MaskView
+from suture_bt.perception.pose_fit import MaskView, edge_points
 
 RULE = ColourRule()
 PINK, GREY, BLACK = (215, 140, 132), (158, 161, 168), (20, 10, 10)
@@ -145,3 +145,44 @@ def test_a_violet_band_piece_along_the_jaws_outline_is_kept():
     img[57:60, 203:241] = GREY
     out[50:150, 90:270] = without_occluder_rims(img, view, RULE, 3).mask
     assert not out[57:60, 203:241].any()
+
+
+def _wire_over_cavity_cut_by_tissue():
+    """The wire (x 100-200, y 100) seen over the dark cavity; lit tissue from x=201 on hides
+    the rest of it (the ridge in front): the mask stops at the tissue's silhouette."""
+    img = np.empty((200, 320, 3), np.uint8)
+    img[:] = BLACK
+    img[:, 201:] = PINK
+    mask = np.zeros((200, 320), bool)
+    mask[98:103, 100:201] = True
+    img[mask] = GREY
+    return img, MaskView(mask[90:110, 90:215], (90, 90))
+
+
+def test_tissue_that_cuts_the_wire_off_over_the_cavity_is_marked_at_that_end_only():
+    img, view = _wire_over_cavity_cut_by_tissue()
+    occ = with_occluder(img, view, RULE, radius=10.0).occluder
+    x0, y0 = view.origin
+    assert occ[100 - y0, 201 - x0]  # the tissue ahead of the cut end
+    assert not occ[:, : 195 - x0].any()  # nothing along the wire's sides or at its free end
+    # Without the end radius the tissue is not an occluder (it may lie behind the needle).
+    assert not with_occluder(img, view, RULE).occluder[100 - y0, 201 - x0]
+    # The cut is no longer an edge of the fit: no edge point at x ≈ 200.5 on the wire's row.
+    cut = with_occluder(img, view, RULE, radius=10.0)
+    pts = edge_points(cut)
+    at_cut = (np.abs(pts[:, 0] - 200.5) < 0.6) & (np.abs(pts[:, 1] - 100) < 2.5)
+    assert not at_cut.any()
+    plain = edge_points(view)
+    assert ((np.abs(plain[:, 0] - 200.5) < 0.6) & (np.abs(plain[:, 1] - 100) < 2.5)).any()
+
+
+def test_a_wire_seen_over_tissue_ending_near_the_cavity_keeps_its_end():
+    """The wire lies over lit tissue and ends a few pixels short of the dark cavity: its end
+    is the wire's own (a wire behind the tissue would not show over it)."""
+    img, view = _wire_over_cavity_cut_by_tissue()
+    img[:] = PINK
+    img[:, 204:] = BLACK
+    mask = np.zeros((200, 320), bool)
+    mask[98:103, 100:201] = True
+    img[mask] = GREY
+    assert not with_occluder(img, view, RULE, radius=10.0).occluder.any()

@@ -13,6 +13,7 @@ from dataclasses import dataclass, replace
 
 from suture_bt.geometry import NeedleModel
 from suture_bt.interfaces import StereoCameraModel
+from suture_bt.perception.base_or_tip import occlusion_radius
 from suture_bt.perception.colour_refine import (
     ColourRule,
     coarse_components,
@@ -119,7 +120,7 @@ class NeedleMasks:
                     f"({int(view.mask.sum())} < {MIN_NEEDLE_PIXELS})"
                 )
             view = without_occluder_rims(img, view, self.rule, round(RIM_REACH * half_width))
-            view = with_occluder(img, view, self.rule)
+            view = with_occluder(img, view, self.rule, occlusion_radius(half_width))
             if self.use_free_space:
                 dt, org = free_space_dt(img, view)
                 view = replace(view, free_dt=dt, free_origin=org)
