@@ -186,3 +186,15 @@ def test_a_wire_seen_over_tissue_ending_near_the_cavity_keeps_its_end():
     mask[98:103, 100:201] = True
     img[mask] = GREY
     assert not with_occluder(img, view, RULE, radius=10.0).occluder.any()
+
+
+def test_a_wire_over_tissue_going_into_a_dark_port_square_keeps_its_end():
+    """The wire lies over lit tissue and its end reaches a port's dark square: the cavity lies
+    ahead of the end, the tissue beside it, so nothing there is the ridge's outline."""
+    img, view = _wire_over_cavity_cut_by_tissue()
+    img[:] = PINK
+    img[85:115, 199:230] = BLACK
+    mask = np.zeros((200, 320), bool)
+    mask[98:103, 100:201] = True
+    img[mask] = GREY
+    assert not with_occluder(img, view, RULE, radius=10.0).occluder.any()

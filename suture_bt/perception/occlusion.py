@@ -24,7 +24,6 @@ from suture_bt.perception.colour_refine import (
     needle_coloured,
     violet_score,
 )
-from suture_bt.perception.edge_samples import mask_ends
 from suture_bt.perception.pose_fit import MaskView, edge_points
 
 #: Extensions (fractions of the visible chord) tried for an occluded end.
@@ -34,9 +33,9 @@ EXTENSIONS = (0.35, 0.7)
 SILHOUETTE_SHARE = 0.1
 #: Tissue: red above blue by this much (8-bit levels); cavity: level below the needle's floor.
 TISSUE_RED_MINUS_BLUE = 30.0
-#: Least share of the pixels bordering the mask near an end that must be dark cavity for lit
-#: tissue there to be the silhouette that hides the wire (a wire seen over the cavity, cut off
-#: where the tissue begins), not tissue behind a wire that ends over it.
+#: Least share of the pixels beside the wire near an end that must be dark cavity for lit
+#: tissue ahead of that end to be the silhouette that hides the wire (a wire seen over the
+#: cavity, cut off where the tissue begins), not tissue behind a wire that ends over it.
 CUT_CAVITY_SHARE = 0.5
 
 
@@ -113,31 +112,66 @@ def with_occluder(
         return view
     crop = rgb[y0 : y0 + h, x0 : x0 + w]
     grey = needle_coloured(crop, rule) & ~view.mask
-    if radius is not None and view.mask.sum() >= 2:
-        ends = np.stack(mask_ends(view)) - np.array(view.origin, float)
-        grey |= silhouette_cut(crop, view.mask, rule, radius, ends)
+    if radius is not None and view.mask.any():
+        grey |= silhouette_cut(crop, view.mask, rule, radius)
     near = cv2.dilate(grey.astype(np.uint8), np.ones((3, 3), np.uint8)).astype(bool)
     return replace(view, occluder=near & ~view.mask)
 
 
 def silhouette_cut(
-    crop: np.ndarray, mask: np.ndarray, rule: ColourRule, radius: float, ends
+    crop: np.ndarray, mask: np.ndarray, rule: ColourRule, radius: float
 ) -> np.ndarray:
-    """Lit tissue pixels that cut the mask off at one of its ``ends`` (crop px) where the wire is
-    seen over the dark cavity: the tissue's silhouette hides the needle there (a wire in front
-    of the tissue would show over it), so the mask's boundary is a cut, not the wire's end."""
-    c16 = crop.astype(np.int16)
-    level = c16.sum(-1) / 3.0
-    tissue = (c16[..., 0] - c16[..., 2] >= TISSUE_RED_MINUS_BLUE) & (level >= rule.min_level)
-    cavity = level < rule.min_level
-    ring = cv2.dilate(mask.astype(np.uint8), np.ones((3, 3), np.uint8)).astype(bool) & ~mask
-    yy, xx = np.mgrid[: mask.shape[0], : mask.shape[1]]
+    """Lit tissue pixels ahead of one of the mask's two ends (its mutually farthest pixels)
+    that cut it off where the wire is seen over the dark cavity: the tissue's silhouette hides
+    the needle there (a wire in front of the tissue would show over it), so the mask's boundary
+    is a cut, not the wire's end. The wire counts as seen over the cavity when most pixels
+    beside it within ``radius`` of the end are cavity; a wire lying over tissue keeps its end,
+    even at a port's dark square or a pixel from the cavity. Most views have no cavity beside
+    the mask and return at once."""
     out = np.zeros_like(mask, dtype=bool)
-    for u, v in ends:
-        near = ring & ((xx - u) ** 2 + (yy - v) ** 2 <= radius**2)
+    ring = cv2.dilate(mask.astype(np.uint8), np.ones((3, 3), np.uint8)).astype(bool) & ~mask
+    ys, xs = np.nonzero(ring)
+    c16 = crop[ys, xs].astype(np.int16)
+    dark = c16.sum(-1) / 3.0 < rule.min_level
+    lit = (c16[:, 0] - c16[:, 2] >= TISSUE_RED_MINUS_BLUE) & ~dark
+    if not dark.any() or not lit.any():
+        return out
+    my, mx = np.nonzero(mask)
+    pix = np.stack([mx, my], 1).astype(float)
+    hull = cv2.convexHull(pix.astype(np.float32)).reshape(-1, 2).astype(float)
+    d = np.sum((hull[:, None] - hull[None]) ** 2, -1)
+    ring_px = np.stack([xs, ys], 1).astype(float)
+    for end in hull[list(np.unravel_index(np.argmax(d), d.shape))]:
+        back = pix[np.sum((pix - end) ** 2, 1) <= (2 * radius) ** 2].mean(0)
+        axis = end - back
+        if not np.any(axis):
+            continue
+        rel = ring_px - end
+        near = np.sum(rel**2, 1) <= radius**2
+        ahead = rel @ (axis / np.linalg.norm(axis)) >= -1.0
+        beside = near & ~ahead
+        if beside.any() and dark[beside].mean() >= CUT_CAVITY_SHARE:
+            cut = near & ahead & lit
+            out[ys[cut], xs[cut]] = True
+    return out
+    lit = (c16[:, 0] - c16[:, 2] >= TISSUE_RED_MINUS_BLUE) & ~dark
+    if not lit.any():
+        return out
+    cavity, tissue = np.zeros_like(ring), np.zeros_like(ring)
+    cavity[ys[dark], xs[dark]] = True
+    tissue[ys[lit], xs[lit]] = True
+    hull = cv2.convexHull(cv2.findNonZero(mask.astype(np.uint8))).reshape(-1, 2).astype(float)
+    d = np.sum((hull[:, None] - hull[None]) ** 2, -1)
+    h, w = mask.shape
+    r = int(np.ceil(radius))
+    for u, v in hull[list(np.unravel_index(np.argmax(d), d.shape))]:
+        a, b = max(int(v) - r, 0), min(int(v) + r + 1, h)
+        c, e = max(int(u) - r, 0), min(int(u) + r + 1, w)
+        yy, xx = np.mgrid[a:b, c:e]
+        near = ring[a:b, c:e] & ((xx - u) ** 2 + (yy - v) ** 2 <= radius**2)
         n = int(near.sum())
-        if n and (cavity & near).sum() >= CUT_CAVITY_SHARE * n:
-            out |= tissue & near
+        if n and (cavity[a:b, c:e] & near).sum() >= CUT_CAVITY_SHARE * n:
+            out[a:b, c:e] |= tissue[a:b, c:e] & near
     return out
 
 
