@@ -154,25 +154,6 @@ def silhouette_cut(
             cut = near & ahead & lit
             out[ys[cut], xs[cut]] = True
     return out
-    lit = (c16[:, 0] - c16[:, 2] >= TISSUE_RED_MINUS_BLUE) & ~dark
-    if not lit.any():
-        return out
-    cavity, tissue = np.zeros_like(ring), np.zeros_like(ring)
-    cavity[ys[dark], xs[dark]] = True
-    tissue[ys[lit], xs[lit]] = True
-    hull = cv2.convexHull(cv2.findNonZero(mask.astype(np.uint8))).reshape(-1, 2).astype(float)
-    d = np.sum((hull[:, None] - hull[None]) ** 2, -1)
-    h, w = mask.shape
-    r = int(np.ceil(radius))
-    for u, v in hull[list(np.unravel_index(np.argmax(d), d.shape))]:
-        a, b = max(int(v) - r, 0), min(int(v) + r + 1, h)
-        c, e = max(int(u) - r, 0), min(int(u) + r + 1, w)
-        yy, xx = np.mgrid[a:b, c:e]
-        near = ring[a:b, c:e] & ((xx - u) ** 2 + (yy - v) ** 2 <= radius**2)
-        n = int(near.sum())
-        if n and (cavity[a:b, c:e] & near).sum() >= CUT_CAVITY_SHARE * n:
-            out[a:b, c:e] |= tissue[a:b, c:e] & near
-    return out
 
 
 #: A mask piece with at least this share of its pixels within ``reach_px`` of an occluder hugs
