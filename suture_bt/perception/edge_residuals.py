@@ -160,7 +160,7 @@ def residuals(
     if theta is None:
         theta = nearest_arc_angle(o, d, model, grid=grid, start=theta_start)
         if rays.cut is not None:
-            theta, _ = _to_seen(theta, rays.spans(T), model)
+            theta = _to_seen(theta, rays.spans(T), model)
     f, qd = _arc_f(theta, o, d, model.radius)
     dist = np.sqrt(np.maximum(f, 0.0))
     depth = qd * rays.dz[None]
@@ -169,8 +169,7 @@ def residuals(
 
 
 def _to_seen(theta: np.ndarray, spans: np.ndarray, model: NeedleModel):
-    """Angles (K, N) moved out of the hidden spans (K, 2, 2) to their seen ends, and which
-    span end each sits at (2·span + end; -1: not moved)."""
+    """Angles (K, N) moved out of the hidden spans (K, 2, 2) to their seen ends."""
     return clamp_all(
         np.ascontiguousarray(theta, dtype=float),
         np.ascontiguousarray(spans, dtype=float),

@@ -47,9 +47,10 @@ def seed_poses(priors: Sequence[NeedlePrior], model: NeedleModel) -> np.ndarray:
     turns = np.linspace(0.0, 2 * np.pi, SEED_TURNS, endpoint=False)
     ports = [p for p in priors if isinstance(p, PortPrior)]
     if ports:
-        turns = _turns_through(ports[0].point - pinch, e0, e1, model.radius)
-        if not len(turns):  # the port lies beyond the circle's reach: the nearest turns
-            turns = np.linspace(0.0, 2 * np.pi, SEED_TURNS, endpoint=False)
+        through = _turns_through(ports[0].point - pinch, e0, e1, model.radius)
+        if len(through):
+            turns = through
+        else:  # the port lies beyond the circle's reach: the nearest turns
             centres = pinch - model.radius * (
                 np.cos(turns)[:, None] * e0 + np.sin(turns)[:, None] * e1
             )

@@ -165,13 +165,9 @@ def clamp_to_seen(th, spans, lo, hi):
 
 @njit(cache=True)
 def clamp_all(theta, spans, lo, hi):
-    """:func:`clamp_to_seen` over angles (K, N) with each pose's spans (K, 2, 2): the moved
-    angles and which span end each sits at (2·span + end; -1: not moved)."""
+    """:func:`clamp_to_seen` over angles (K, N) with each pose's spans (K, 2, 2)."""
     out = theta.copy()
-    which = np.full(theta.shape, -1)
     for k in range(theta.shape[0]):
         for n in range(theta.shape[1]):
-            out[k, n], j, e = clamp_to_seen(theta[k, n], spans[k], lo, hi)
-            if j >= 0:
-                which[k, n] = 2 * j + e
-    return out, which
+            out[k, n] = clamp_to_seen(theta[k, n], spans[k], lo, hi)[0]
+    return out
