@@ -3,9 +3,11 @@ benchmark's line, ``rival`` picks the cheapest usable clearly different pose, an
 clean outline leaves no close rival. The slide probe's starts slide the answer along its own
 circle, and from a pose slid off the needle it finds the needle. The near probe's small turns
 take a Task 3 start answer stopped 5° off into the needle's own basin. A tie is measured
-apart from the answer's base ↔ tip swap, which is the same outline."""
+apart from the answer's base ↔ tip swap, which is the same outline. Probes run together give
+each its own result, to the bit."""
 
 import numpy as np
+import pytest
 from perception_helpers import pose_errors
 from scipy.spatial.transform import Rotation
 from test_pose_fit import MODEL, _scene_1080p, _tip_hidden
@@ -27,6 +29,7 @@ from suture_bt.perception.rival_probe import (
     near_starts,
     pose_offset,
     probe_starts,
+    probe_together,
     rival,
     slide_starts,
     tie_ratio,
@@ -178,3 +181,34 @@ def test_the_near_probe_takes_a_stopped_fit_into_the_needles_basin():
     assert pose_errors(stopped.T_cam_needle, T_true)[1] > 3.0
     assert pose_errors(found.T_cam_needle, T_true)[1] < 0.5
     assert found.fit.cost < 0.5 * stopped.fit.cost
+
+
+def test_probes_run_together_give_each_probe_its_own_result_to_the_bit():
+    """The three probes of a fit, from two different answers in one batch, against each run
+    alone (the fit runs them together and relies on this to keep its answers)."""
+    st, T, left, right, _ = _scene_1080p(5, 0.0)
+    rays = edge_rays(st, edge_points(left), edge_points(right))
+    fit_rays = FitRays(rays, rays.subset(np.arange(0, len(rays), 8)), rays)
+    small = {"n_mid": 2, "n_polish": 1}
+    probes = [
+        RivalProbe(st, MODEL, starts=slide_starts, **small),
+        RivalProbe(st, MODEL, starts=near_starts, apart_from_answer=False, **small),
+        RivalProbe(st, MODEL),
+    ]
+    answers = [pose_to_params(P[None], st.left, MODEL)[0] for P in (T, T, _slid(T, 10.0))]
+    together = probe_together(probes, answers, fit_rays, [], "geman_mcclure")
+    for probe, x_answer, (x, cost) in zip(probes, answers, together, strict=True):
+        x_alone, cost_alone = probe(x_answer, fit_rays, [], "geman_mcclure")
+        assert np.array_equal(x, x_alone) and np.array_equal(cost, cost_alone)
+    # From the needle, slides come back to it (none kept) and the near probe keeps its best;
+    # from a pose slid off it, the rival probe finds poses clearly apart (the needle's among
+    # them).
+    assert [len(x) for x, _ in together] == [0, 1, 2]
+
+
+def test_probes_with_other_cameras_or_iterations_are_not_run_together():
+    st = _scene_1080p(5, 0.0)[0]
+    x = pose_to_params(_pose()[None], st.left, MODEL)[0]
+    probes = [RivalProbe(st, MODEL), RivalProbe(st, MODEL, iterations=(3, 3, 3))]
+    with pytest.raises(ValueError, match="share their cameras, model and iterations"):
+        probe_together(probes, [x, x], FitRays(None, None, None), [], "geman_mcclure")

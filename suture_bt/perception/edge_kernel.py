@@ -20,9 +20,15 @@ from suture_bt.perception.edge_residuals import N_THETA_GRID, EdgeRays
 from suture_bt.perception.tissue_cut import clamp_to_seen
 
 _LOSS_CODES = {"cauchy": 0, "geman_mcclure": 1}
+#: Floating-point licences of the compiled loop: fused multiply-adds, reciprocals, the sign
+#: of zero; never "no NaN or infinity" (undefined residuals are NaN and tested as such), nor
+#: reordered sums or approximate library functions (with those, one ray in 5,543 of the
+#: tissue-cut test found another nearest arc angle). About 20 % faster (on in-port views'
+#: calls: 67 → 54 ns per pose and ray); results move at the rounding level.
+FAST_MATH = {"contract", "arcp", "nsz"}
 
 
-@njit(cache=True)
+@njit(cache=True, fastmath=FAST_MATH)
 def _turned(c, s, delta):
     """cos and sin of θ - delta from those of θ (series for the small steps of the search:
     exact to rounding for |delta| ≤ 0.25, the library's cos and sin beyond)."""
@@ -35,7 +41,7 @@ def _turned(c, s, delta):
     return c * cd + s * sd, s * cd - c * sd
 
 
-@njit(cache=True)
+@njit(cache=True, fastmath=FAST_MATH)
 def _nearest_angle(o0, o1, o2, d0, d1, d2, rad, lo, hi, gv, gc, gs, start, c, s):
     """:func:`edge_residuals.nearest_arc_angle` for one ray, with its cosine and sine: a grid
     search over the angles ``gv`` (cosines ``gc``, sines ``gs``) unless ``start`` ≥ lo - 1
@@ -65,13 +71,13 @@ def _nearest_angle(o0, o1, o2, d0, d1, d2, rad, lo, hi, gv, gc, gs, start, c, s)
     return theta, c, s
 
 
-@njit(cache=True)
+@njit(cache=True, fastmath=FAST_MATH)
 def _irls(r, sigma, loss):
     q = 1.0 + (r / sigma) ** 2
     return 1.0 / q if loss == 0 else 1.0 / (q * q)
 
 
-@njit(cache=True, parallel=True)
+@njit(cache=True, parallel=True, fastmath=FAST_MATH)
 def edge_system(
     T, T6, steps, origins, dirs, dz, focal, rad, wire, lo, hi, grid, theta_start,
     cs_start, sigma, loss, want_system, spans, dspans,

@@ -37,7 +37,7 @@ costly as the needle's own.
 
 from __future__ import annotations
 
-from collections.abc import Callable
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 
 import numpy as np
@@ -189,19 +189,7 @@ class RivalProbe:
         """Polished probe parameters (n, 6) and costs (n,) comparable with the answer's
         polish (same rays, loss and ``terms``): the cheapest probed poses clearly different
         from the answer and from each other (none: empty)."""
-        cam = self.stereo.left
-        T_answer = params_to_pose(np.asarray(x_answer)[None], cam, self.model)[0]
-        x = pose_to_params(self.starts(T_answer, self.model), cam, self.model)
-        it1, it2, it3 = self.iterations
-        x, c = levenberg_marquardt(x, rays.coarse, self.stereo, self.model, it1, 1.0, terms)
-        x = x[self._distinct(x, c, T_answer, self.n_mid)]
-        if not len(x):
-            return np.zeros((0, 6)), np.zeros(0)
-        x, c = levenberg_marquardt(x, rays.mid, self.stereo, self.model, it2, 1.0, terms)
-        x = x[self._distinct(x, c, T_answer, self.n_polish)]
-        if not len(x):
-            return np.zeros((0, 6)), np.zeros(0)
-        return levenberg_marquardt(x, rays.all, self.stereo, self.model, it3, 1.0, terms, loss)
+        return probe_together([self], [x_answer], rays, terms, loss)[0]
 
     def _distinct(self, x: np.ndarray, c: np.ndarray, T_answer: np.ndarray, n: int) -> list:
         """Indices of the n cheapest rows clearly different from the answer and each other."""
@@ -214,6 +202,51 @@ class RivalProbe:
             if apart and all(distinct(T[j], T[k]) for k in keep):
                 keep.append(int(j))
         return keep
+
+
+def probe_together(
+    probes: Sequence[RivalProbe],
+    x_answers: Sequence[np.ndarray],
+    rays: FitRays,
+    terms: list,
+    loss: str,
+) -> list[tuple[np.ndarray, np.ndarray]]:
+    """Each probe's result from its answer, as its own call gives it, from one batched
+    descent per stage for all of them: the solver treats every start on its own, so one
+    batch costs the arithmetic of its rows once instead of a descent's fixed cost per probe
+    (in_port views: the three probes of an answer 24 → 13 ms)."""
+    if not probes:
+        return []
+    first = probes[0]
+    if any(
+        p.stereo is not first.stereo or p.model is not first.model
+        or p.iterations != first.iterations
+        for p in probes
+    ):  # fmt: skip
+        raise ValueError("probes run together must share their cameras, model and iterations")
+    stereo, model, cam = first.stereo, first.model, first.stereo.left
+    answers = [params_to_pose(np.asarray(x)[None], cam, model)[0] for x in x_answers]
+    pairs = zip(probes, answers, strict=True)
+    xs = [pose_to_params(p.starts(T, model), cam, model) for p, T in pairs]
+    cs = [np.zeros(len(x)) for x in xs]
+    it1, it2, it3 = first.iterations
+    stages = ((rays.coarse, it1, 1.0, "cauchy"), (rays.mid, it2, 1.0, "cauchy"))
+    stages += ((rays.all, it3, 1.0, loss),)
+    for k, (subset, iters, sigma, stage_loss) in enumerate(stages):
+        if k:  # carry each probe's n cheapest clearly different results on
+            for i, p in enumerate(probes):
+                n = p.n_mid if k == 1 else p.n_polish
+                if len(xs[i]):
+                    xs[i] = xs[i][p._distinct(xs[i], cs[i], answers[i], n)]
+        sizes = np.cumsum([0] + [len(x) for x in xs])
+        if not sizes[-1]:
+            return [(np.zeros((0, 6)), np.zeros(0)) for _ in probes]
+        x, c = levenberg_marquardt(
+            np.concatenate(xs), subset, stereo, model, iters, sigma, terms, stage_loss
+        )
+        rows = [slice(a, b) for a, b in zip(sizes[:-1], sizes[1:], strict=True)]
+        xs, cs = [x[r] for r in rows], [c[r] for r in rows]
+    return list(zip(xs, cs, strict=True))
 
 
 def rival(
