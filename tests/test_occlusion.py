@@ -108,6 +108,23 @@ def test_a_sliver_along_the_jaws_outline_is_dropped_but_a_piece_leaving_it_is_ke
     assert occ[57:60, 203:241].all()
 
 
+def test_a_lit_corner_half_along_the_jaws_outline_is_dropped():
+    """A piece that runs along the jaw's top for 12 px and leaves it for 10 (share 0.55): a lit
+    corner of the jaw, not wire (session 22's report seed 38781886, `occluded` #213: such a
+    piece, kept at share 0.57, bent a fit 10.7° off). The stub leaving the jaw's side stays."""
+    img, view = _wire_jaw_rim_and_stub()
+    mask = np.zeros((200, 320), bool)
+    mask[50:150, 90:270] = view.mask
+    mask[57:60, 203:241] = False  # no sliver along the whole top ...
+    mask[57:60, 232:254] = True  # ... a corner piece instead
+    img[57:60, 232:254] = GREY
+    view = MaskView(mask[50:150, 90:270], view.origin)
+    out = np.zeros((200, 320), bool)
+    out[50:150, 90:270] = without_occluder_rims(img, view, RULE, 3).mask
+    assert not out[57:60, 232:254].any()
+    assert out[98:103, 100:201].all() and out[98:103, 241:261].all()
+
+
 def test_the_largest_piece_is_kept_even_when_it_hugs_an_occluder():
     img, view = _wire_jaw_rim_and_stub()
     rims = np.zeros((200, 320), bool)
