@@ -201,9 +201,11 @@ def test_probes_run_together_give_each_probe_its_own_result_to_the_bit():
         x_alone, cost_alone = probe(x_answer, fit_rays, [], "geman_mcclure")
         assert np.array_equal(x, x_alone) and np.array_equal(cost, cost_alone)
     # From the needle, slides come back to it (none kept) and the near probe keeps its best;
-    # from a pose slid off it, the rival probe finds poses clearly apart (the needle's among
-    # them).
+    # from a pose slid off it, the rival probe finds poses clearly apart, the needle's among
+    # them.
     assert [len(x) for x, _ in together] == [0, 1, 2]
+    found = params_to_pose(together[2][0], st.left, MODEL)
+    assert min(pose_errors(P, T)[1] for P in found) < 0.5
 
 
 def test_probes_with_other_cameras_or_iterations_are_not_run_together():

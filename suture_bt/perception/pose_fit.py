@@ -323,8 +323,8 @@ class PoseFitter:
         Slides and small turns are probes whose cheaper result replaces the answer (never a
         rival); then the rival probe. Each starts from the answer the probes before it left,
         so all of them descend together from the polished answer and a probe is run again
-        only after an earlier one has moved it (the same results, a third of the solver's
-        fixed costs)."""
+        only after an earlier one has moved it (the same results with one descent per stage
+        instead of three)."""
         b, ok, misses = chosen
         small = {"n_mid": 2, "n_polish": 1}
         probes = []
