@@ -88,3 +88,54 @@ def test_the_outline_s_end_at_the_port_is_explained_by_the_tissue_s_cut():
     after = [_edge_cost(P, rays) for P in (T, _slid(T, -20.0))]
     assert after[0] < 0.92 * before[0]
     assert abs(after[1] / before[1] - 1.0) < 0.01
+
+
+def test_pieces_hide_the_arc_where_any_of_them_does():
+    """Two convex pieces, one over each end: each end is hidden. Taken as one piece (the
+    space below both planes, which the arc never enters) they hide nothing."""
+    a, b = np.radians(60.0), np.radians(150.0)
+    tip_side, base_side = _plane_at(a, towards_tip=False), _plane_at(b, towards_tip=True)
+    two = TissueCut.from_pieces([[tip_side], [base_side]], np.eye(4), MODEL)
+    spans = two.spans(T0[None])[0]
+    np.testing.assert_allclose(spans, [[LO, a + SHIFT], [b - SHIFT, HI]], atol=1e-9)
+    one = TissueCut.from_pieces([[tip_side, base_side]], np.eye(4), MODEL)
+    assert np.isnan(one.spans(T0[None])).all()
+
+
+def test_one_piece_is_the_port_cut_and_no_piece_is_no_cut():
+    ports = [_plane_at(np.radians(90.0), towards_tip=True)]
+    as_ports = TissueCut.from_ports(ports, np.eye(4), MODEL)
+    as_piece = TissueCut.from_pieces([ports], np.eye(4), MODEL)
+    T = np.stack([T0, _slid(T0, 10.0), _slid(T0, -25.0)])
+    np.testing.assert_array_equal(as_ports.spans(T), as_piece.spans(T))
+    assert TissueCut.from_pieces([], np.eye(4), MODEL) is None
+    assert TissueCut.from_pieces([[]], np.eye(4), MODEL) is None
+
+
+def test_the_phantom_s_solid_explains_the_outline_s_end_without_a_port_prior():
+    """The in-port scene above, given no priors: the phantom's known solid cuts the arc where
+    it enters the ridge, as the port prior does."""
+    from perception_helpers import task_scene
+
+    st, _, _, T, _, tissue, masks = task_scene("in_port", 7, masks=True)
+    rays = edge_rays(st, edge_points(MaskView(masks[0])), edge_points(MaskView(masks[1])))
+    before = _edge_cost(T, rays)
+    rays.cut = TissueCut.from_pieces(tissue.pieces, st.left.T_cam_world, MODEL)
+    assert _edge_cost(T, rays) < 0.92 * before
+
+
+def test_a_piece_hides_only_a_stretch_of_arc_that_reaches_its_depth():
+    """The tissue's plane just under the arc's top point (the arc dips 0.5 mm into it there):
+    a piece that asks for 1 mm of depth leaves the arc seen whole, one that asks for none
+    hides the dip, and a plane 2 mm further in is hidden either way."""
+    top = np.radians(90.0)  # the arc's point farthest along the needle's y
+    point = T0[:3, :3] @ MODEL.point_at(top) + T0[:3, 3]
+    up = T0[:3, :3] @ np.array([0.0, -1.0, 0.0])  # outward: towards the arc's centre
+
+    def spans(dip: float, depth: float) -> np.ndarray:
+        piece = [(point + dip * up, up)]
+        return TissueCut.from_pieces([piece], np.eye(4), MODEL, [depth]).spans(T0[None])[0]
+
+    assert np.isnan(spans(0.0005, 0.001)).all()
+    assert np.isfinite(spans(0.0005, 0.0)[0]).all()
+    assert np.isfinite(spans(0.0025, 0.001)[0]).all()

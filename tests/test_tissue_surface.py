@@ -9,6 +9,7 @@ from suture_bt.geometry.tissue_surface import (
     RIDGE_END_MARGIN,
     height_above_tissue,
     ridge_segments,
+    solid_pieces,
     surface_height,
 )
 from suture_bt.transforms import pose_to_transform
@@ -79,3 +80,21 @@ def test_the_surface_matches_the_simulated_solid():
         assert body.inside_tissue(surface - 0.0003 * up).all()
     finally:
         p.disconnect(cid)
+
+
+@pytest.mark.parametrize("pose", sorted(POSES))
+def test_the_solid_s_pieces_hold_exactly_the_points_under_the_surface(pose):
+    """Inside a piece (below all its planes) ⇔ below the surface, over the block's footprint,
+    wherever the phantom stands."""
+    phantom = PhantomModel(POSES[pose])
+    rng = np.random.default_rng(3)
+    q = rng.uniform((-0.04, -0.05, 0.066), (0.04, 0.07, 0.08), (5000, 3))
+    T = phantom.T_world_phantom
+    world = q @ T[:3, :3].T + T[:3, 3]
+    inside = np.zeros(len(q), bool)
+    for piece in solid_pieces(phantom):
+        P = np.array([p for p, _ in piece])
+        N = np.array([n for _, n in piece])
+        inside |= np.all(np.einsum("kqj,qj->kq", world[:, None] - P[None], N) < 0, axis=1)
+    assert 0.2 < inside.mean() < 0.8
+    np.testing.assert_array_equal(inside, height_above_tissue(phantom, world) < 0)

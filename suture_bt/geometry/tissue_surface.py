@@ -12,7 +12,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from suture_bt.geometry.phantom import TISSUE_TOP_Z, PhantomModel
+from suture_bt.geometry.phantom import TISSUE_TOP_Z, TISSUE_X, TISSUE_Y, PhantomModel
 
 #: How far the ridge runs past the outer pairs (m, along the phantom's y).
 RIDGE_END_MARGIN = 0.012
@@ -60,3 +60,34 @@ def height_above_tissue(phantom: PhantomModel, points_world: np.ndarray) -> np.n
     Ti = np.linalg.inv(phantom.T_world_phantom)
     z = (np.atleast_2d(points_world) @ Ti[:3, :3].T + Ti[:3, 3])[:, 2]
     return z - surface_height(phantom, points_world)
+
+
+def solid_pieces(phantom: PhantomModel) -> list[list[tuple[np.ndarray, np.ndarray]]]:
+    """The tissue solid as convex pieces, each a list of (world point, world outward normal)
+    planes it lies below: the block under its flat top within ``TISSUE_X`` × ``TISSUE_Y``, and
+    per pair its ridge segment (under both flanks, between the segment's y ends)."""
+    T = np.asarray(phantom.T_world_phantom, float)
+    R, t = T[:3, :3], T[:3, 3]
+
+    def plane(point, normal) -> tuple[np.ndarray, np.ndarray]:
+        return R @ np.asarray(point, float) + t, R @ np.asarray(normal, float)
+
+    (x0, x1), (y0, y1) = TISSUE_X, TISSUE_Y
+    block = [
+        plane((0.0, 0.0, TISSUE_TOP_Z), (0.0, 0.0, 1.0)),
+        plane((x0, 0.0, 0.0), (-1.0, 0.0, 0.0)),
+        plane((x1, 0.0, 0.0), (1.0, 0.0, 0.0)),
+        plane((0.0, y0, 0.0), (0.0, -1.0, 0.0)),
+        plane((0.0, y1, 0.0), (0.0, 1.0, 0.0)),
+    ]
+    pieces = [block]
+    for s0, s1, entry, exit_ in ridge_segments(phantom):
+        pieces.append(
+            [
+                plane(entry[:3, 3], entry[:3, 2]),
+                plane(exit_[:3, 3], exit_[:3, 2]),
+                plane((0.0, s0, 0.0), (0.0, -1.0, 0.0)),
+                plane((0.0, s1, 0.0), (0.0, 1.0, 0.0)),
+            ]
+        )
+    return pieces

@@ -142,7 +142,9 @@ class NeedleLocalizer:
         ``tissue`` (optional task knowledge, world points → bool: where the known phantom may
         hide a needle, :func:`~suture_bt.perception.unseen_arc.tissue_model`) lets the tissue
         hide only there; without it any tissue-coloured pixel may hide the needle (its depth
-        is unknown), and only the background exposes a hypothesis.
+        is unknown), and only the background exposes a hypothesis. A tissue that also has
+        ``pieces`` (:class:`~suture_bt.perception.unseen_arc.PhantomTissue`) gives the fit the
+        solid, inside which the arc is hidden (:mod:`~suture_bt.perception.tissue_cut`).
         ``max_exposed`` (m of arc): see :data:`MAX_EXPOSED` (inf: no check)."""
         self.stereo = stereo
         self.model = model or NeedleModel()
@@ -162,7 +164,12 @@ class NeedleLocalizer:
         self.max_position_std_mm = MAX_POSITION_STD_MM
         self.tissue = tissue
         self.max_exposed = max_exposed
-        self.fitter = PoseFitter(stereo, self.model, depth_range=(MIN_DEPTH, MAX_DEPTH))
+        self.fitter = PoseFitter(
+            stereo,
+            self.model,
+            depth_range=(MIN_DEPTH, MAX_DEPTH),
+            tissue_solid=getattr(tissue, "pieces", None),
+        )
         self.input_width = INPUT_SIZE[0]
         self.coarse_threshold = 0.3
         #: The last call's network output (coarse probabilities, scale), kept whether or not

@@ -41,6 +41,7 @@ from suture_bt.perception.edge_samples import (  # noqa: F401 - mask_ends re-exp
     mask_ends,
     subsample,
 )
+from suture_bt.perception.entry_starts import entry_starts
 from suture_bt.perception.fit_result import PoseFitResult
 from suture_bt.perception.fit_solver import (  # noqa: F401 - re-exported
     FD_STEPS,
@@ -136,6 +137,13 @@ class PoseFitter:
     #: Whether the answer is also turned by a few degrees in search of a cheaper basin next to
     #: it (:mod:`rival_probe`).
     probe_near: bool = True
+    #: The task's known tissue solid as convex pieces of world (point, outward normal) planes
+    #: (:func:`~suture_bt.geometry.tissue_surface.solid_pieces`; None: unknown): the arc
+    #: inside it is hidden, and the seen wire ends where it enters (:mod:`tissue_cut`).
+    tissue_solid: Sequence | None = None
+    #: How deep (m) an arc must reach into the known solid for the solid to hide it: a pose
+    #: that only dips under the surface is seen whole (not so for the ports' planes).
+    solid_depth: float = 0.001
 
     def fit(
         self,
@@ -170,8 +178,10 @@ class PoseFitter:
         (it reaches the mirror twin), the best consistent second-stage pose joins the polish,
         and the answer is the best-cost consistent polished pose; none consistent (or none
         within MAX_PRIOR_COST_RATIO of the cheapest) raises :class:`PriorContradicted` naming
-        the prior. Ports given with their surface normals hide the arc below them: the edge
-        rays measure to its seen part (:mod:`tissue_cut`). Without priors nothing changes.
+        the prior. Ports given with their surface normals hide the arc below them, and the
+        known tissue solid (``tissue_solid``) the arc inside it: the edge rays measure to its
+        seen part (:mod:`tissue_cut`), and the search also starts from the wire entering the
+        tissue at an end of the outline (:mod:`entry_starts`).
         """
         rng = np.random.default_rng(self.seed)
         el, er = edge_points(left), edge_points(right)
@@ -183,9 +193,13 @@ class PoseFitter:
         el = subsample(el, self.max_points_per_eye, rng)
         er = subsample(er, self.max_points_per_eye, rng)
         rays = edge_rays(self.stereo, el, er)
-        # A needle in a port: the tissue hides the arc below the port's surface.
+        # The tissue hides the arc inside it: the known solid, and for a needle in a port the
+        # space below the port's surface.
         ports = port_planes(priors)
-        rays.cut = TissueCut.from_ports(ports, self.stereo.left.T_cam_world, self.model)
+        solid = list(self.tissue_solid or ())
+        pieces = ([ports] if ports else []) + solid
+        depths = [0.0] * (len(pieces) - len(solid)) + [self.solid_depth] * len(solid)
+        rays.cut = TissueCut.from_pieces(pieces, self.stereo.left.T_cam_world, self.model, depths)
         nl = len(el)
         coarse = rays.subset(balanced(nl, len(er), self.coarse_points_per_eye, rng))
         mid = rays.subset(balanced(nl, len(er), self.mid_points_per_eye, rng))
@@ -226,6 +240,14 @@ class PoseFitter:
             parts.append(pose_to_params(np.asarray(warm_start)[None], cam, self.model))
         if seeds is not None and len(seeds):
             parts.append(lowest(pose_to_params(np.asarray(seeds), cam, self.model), self.n_keep))
+        if self.tissue_solid and rays.cut is not None:
+            # The outline may end where the wire enters the tissue (own rng: the same draws).
+            ends = farthest_pair(el, np.random.default_rng(self.seed + 1))
+            entry = entry_starts(ends, cam, rays.cut, self.model)
+            if len(entry):
+                parts.append(
+                    lowest(pose_to_params(entry, cam, self.model), self.n_keep_alternative)
+                )
         starts = np.concatenate(parts)
         if not len(starts):
             raise NeedleNotFound("no feasible pose hypothesis from the needle's end points")

@@ -1,14 +1,18 @@
-"""Where the tissue cuts a needle in a port: the arc's spans below the ports' surfaces.
+"""Where the tissue cuts a needle: the arc's spans inside the tissue, which the image cannot show.
 
 The mask of a needle in a port stops where the wire enters the tissue. The fit's edge model
 is the whole arc, whose rounded ends sit at the needle's base and tip; the outline's end at
 the port is then explained only by a pose whose own end sits there, slid along its circle out
 of the tissue (development in-port scenes: the true pose cost 1.3× such a slide, and a grasp's
-held place then refused every pose the fit found). A caller that says the needle is in a port
-(a port prior with its surface normal) says where the tissue is: the part of the arc below
-every given port's surface plane is hidden, and the seen wire ends at the plane. The edge
-residuals take the nearest seen point of the arc: a ray whose nearest arc point is hidden
-measures to the cut, a rounded end set back by the wire's radius so that it reaches the plane.
+held place then refused every pose the fit found). Whoever knows where the tissue is says so:
+a caller that says the needle is in a port (a port prior with its surface normal: the space
+below every given port's surface plane), and the task's known phantom (its solid as convex
+pieces, :func:`~suture_bt.geometry.tissue_surface.solid_pieces`). The part of the arc inside
+any piece is hidden, and the seen wire ends at the surface. The edge residuals take the
+nearest seen point of the arc: a ray whose nearest arc point is hidden measures to the cut, a
+rounded end set back by the wire's radius so that it reaches the surface. A piece may ask that
+the arc reach some depth into it before it hides anything (the phantom's solid does: a pose
+that only dips under the surface would otherwise hide what a needle lying on it shows).
 """
 
 from __future__ import annotations
@@ -30,29 +34,62 @@ MAX_SPANS = 2
 
 @dataclass(frozen=True)
 class TissueCut:
-    """Port surface planes in the left-camera frame: points (Q, 3) and outward normals (Q, 3),
-    for a needle ``model``. A point of the arc is hidden when it lies below every plane."""
+    """The tissue as a union of convex pieces, each the space below all of its planes, in the
+    left-camera frame: plane points (Q, 3), outward normals (Q, 3) and ``groups`` (G + 1
+    offsets: piece g owns planes groups[g]:groups[g + 1]; None: one piece of every plane),
+    for a needle ``model``. A point of the arc is hidden when it lies inside any piece, along
+    a stretch of arc that reaches ``depths[g]`` (m; None: 0) inside some piece g."""
 
     points: np.ndarray
     normals: np.ndarray
     model: NeedleModel
+    groups: np.ndarray | None = None
+    depths: np.ndarray | None = None
 
     @classmethod
     def from_ports(cls, ports, T_cam_world: np.ndarray, model: NeedleModel) -> TissueCut | None:
-        """The cut of ports given as (world point, world outward normal) pairs (None: none)."""
+        """The cut of ports given as (world point, world outward normal) pairs (None: none):
+        one piece, below every port's surface plane."""
         if not ports:
             return None
+        return cls.from_pieces([ports], T_cam_world, model)
+
+    @classmethod
+    def from_pieces(
+        cls, pieces, T_cam_world: np.ndarray, model: NeedleModel, depths=None
+    ) -> TissueCut | None:
+        """The cut of convex pieces, each a list of (world point, world outward normal) planes,
+        and how deep (m) the arc must reach into each to be hidden there (None: no piece
+        with a plane)."""
+        depths = [0.0] * len(pieces) if depths is None else list(depths)
+        kept = [k for k, p in enumerate(pieces) if len(p)]
+        pieces, depths = [list(pieces[k]) for k in kept], [depths[k] for k in kept]
+        if not pieces:
+            return None
         R, t = T_cam_world[:3, :3], T_cam_world[:3, 3]
-        P = np.array([R @ np.asarray(p, float) + t for p, _ in ports])
-        N = np.array([R @ np.asarray(n, float) for _, n in ports])
+        planes = [pl for piece in pieces for pl in piece]
+        P = np.array([R @ np.asarray(p, float) + t for p, _ in planes])
+        N = np.array([R @ np.asarray(n, float) for _, n in planes])
         N /= np.linalg.norm(N, axis=1, keepdims=True)
-        return cls(np.ascontiguousarray(P), np.ascontiguousarray(N), model)
+        groups = np.cumsum([0] + [len(p) for p in pieces]).astype(np.int64)
+        return cls(
+            np.ascontiguousarray(P), np.ascontiguousarray(N), model, groups, np.array(depths)
+        )
 
     def __post_init__(self) -> None:
         m = self.model
         grid = np.linspace(m.tip_angle, m.base_angle, N_CUT_SAMPLES)
         shift = m.wire_radius / m.radius
-        object.__setattr__(self, "_args", (m.radius, m.tip_angle, m.base_angle, shift, grid))
+        groups = self.groups
+        if groups is None:
+            groups = np.array([0, len(self.points)], np.int64)
+        groups = np.ascontiguousarray(groups, dtype=np.int64)
+        depths = np.zeros(len(groups) - 1) if self.depths is None else self.depths
+        depths = np.ascontiguousarray(depths, dtype=np.float64)
+        object.__setattr__(self, "groups", groups)
+        object.__setattr__(self, "depths", depths)
+        args = (groups, depths, m.radius, m.tip_angle, m.base_angle, shift, grid)
+        object.__setattr__(self, "_args", args)
 
     def spans(self, T: np.ndarray) -> np.ndarray:
         """Hidden spans (K, MAX_SPANS, 2) of arc angle per pose (K, 4, 4; NaN rows: none),
@@ -89,28 +126,51 @@ def _root(A, B, C, u, v):
 
 
 @njit(cache=True)
-def _boundary(A, B, C, u, v):
-    """Where 'below every plane' changes within [u, v]: among the planes' roots there, the one
-    where the highest plane height is nearest zero."""
+def _height(A, B, C, G, c, s):
+    """How far outside the tissue the arc point at (cos, sin) = (c, s) is: over the pieces
+    (plane offsets G), the least of each piece's highest plane height (< 0: hidden)."""
+    out = np.inf
+    for g in range(G.shape[0] - 1):
+        top = -np.inf
+        for p in range(G[g], G[g + 1]):
+            top = max(top, A[p] * c + B[p] * s + C[p])
+        out = min(out, top)
+    return out
+
+
+@njit(cache=True)
+def _deep(A, B, C, G, D, c, s):
+    """Whether the arc point at (cos, sin) = (c, s) is at least D[g] inside some piece g."""
+    for g in range(G.shape[0] - 1):
+        top = -np.inf
+        for p in range(G[g], G[g + 1]):
+            top = max(top, A[p] * c + B[p] * s + C[p])
+        if top < 0.0 and top <= -D[g]:
+            return True
+    return False
+
+
+@njit(cache=True)
+def _boundary(A, B, C, G, u, v):
+    """Where 'inside a piece' changes within [u, v]: among the planes' roots there, the one
+    where the tissue height (:func:`_height`) is nearest zero."""
     best, arg = np.inf, 0.5 * (u + v)
     for q in range(A.shape[0]):
         th = _root(A[q], B[q], C[q], u, v)
         if not math.isfinite(th):
             continue
-        c, s = math.cos(th), math.sin(th)
-        g = -np.inf
-        for p in range(A.shape[0]):
-            g = max(g, A[p] * c + B[p] * s + C[p])
+        g = _height(A, B, C, G, math.cos(th), math.sin(th))
         if abs(g) < best:
             best, arg = abs(g), th
     return arg
 
 
 @njit(cache=True)
-def hidden_spans(T, P, N, rad, lo, hi, shift, grid):
-    """Spans (K, 2, 2) of arc angle below every plane (points P, normals N; Q each) for poses
-    T (K, 4, 4): found on ``grid`` (angles lo..hi), their ends solved exactly, those meeting
-    the seen arc set back by ``shift`` (rad) into it. NaN rows: no span."""
+def hidden_spans(T, P, N, G, D, rad, lo, hi, shift, grid):
+    """Spans (K, 2, 2) of arc angle inside the tissue (planes: points P, normals N; Q each;
+    pieces: plane offsets G, depths D) for poses T (K, 4, 4): found on ``grid`` (angles
+    lo..hi), kept where a sample reaches a piece's depth, their ends solved exactly, those
+    meeting the seen arc set back by ``shift`` (rad) into it. NaN rows: no span."""
     K, Q, S = T.shape[0], P.shape[0], grid.shape[0]
     out = np.full((K, 2, 2), np.nan)
     A, B, C = np.empty(Q), np.empty(Q), np.empty(Q)
@@ -123,21 +183,20 @@ def hidden_spans(T, P, N, rad, lo, hi, shift, grid):
                 b += N[q, m] * T[k, m, 1]
                 c += N[q, m] * (T[k, m, 3] - P[q, m])
             A[q], B[q], C[q] = rad * a, rad * b, c
-        n, prev, start = 0, False, lo
+        n, prev, start, deep = 0, False, lo, False
         for i in range(S):
-            hid = True
-            for q in range(Q):
-                if A[q] * gc[i] + B[q] * gs[i] + C[q] >= 0.0:
-                    hid = False
-                    break
+            hid = _height(A, B, C, G, gc[i], gs[i]) < 0.0
             if hid and not prev:
-                start = lo if i == 0 else _boundary(A, B, C, grid[i - 1], grid[i])
-            if prev and not hid and n < 2:
+                start = lo if i == 0 else _boundary(A, B, C, G, grid[i - 1], grid[i])
+                deep = False
+            if hid:
+                deep = deep or _deep(A, B, C, G, D, gc[i], gs[i])
+            if prev and not hid and n < 2 and deep:
                 out[k, n, 0] = start
-                out[k, n, 1] = _boundary(A, B, C, grid[i - 1], grid[i])
+                out[k, n, 1] = _boundary(A, B, C, G, grid[i - 1], grid[i])
                 n += 1
             prev = hid
-        if prev and n < 2:
+        if prev and n < 2 and deep:
             out[k, n, 0], out[k, n, 1] = start, hi
             n += 1
         for j in range(n):  # the cut's rounded end reaches the plane

@@ -30,6 +30,7 @@ import numpy as np
 
 from suture_bt.geometry import NeedleModel
 from suture_bt.geometry.phantom import TISSUE_TOP_Z, TISSUE_X, TISSUE_Y
+from suture_bt.geometry.tissue_surface import solid_pieces
 from suture_bt.interfaces import StereoCameraModel
 from suture_bt.perception.colour_refine import ColourRule, needle_coloured
 from suture_bt.perception.mask_view import MaskView
@@ -245,15 +246,30 @@ def tissue_model(
     return inside
 
 
-def phantom_tissue(phantom, eye: np.ndarray) -> Callable[..., np.ndarray]:
+@dataclass(frozen=True)
+class PhantomTissue:
+    """The task's known phantom as a localiser's tissue knowledge: called (world points, and
+    ``margin`` as :func:`tissue_model`) it says where the tissue may hide a needle seen from
+    its eye; ``pieces`` is its solid as convex pieces of world planes, inside which the fit
+    takes the arc as hidden (:func:`~suture_bt.geometry.tissue_surface.solid_pieces`)."""
+
+    inside: Callable[..., np.ndarray]
+    pieces: list
+
+    def __call__(self, world: np.ndarray, margin: float = 0.0) -> np.ndarray:
+        return self.inside(world, margin=margin)
+
+
+def phantom_tissue(phantom, eye: np.ndarray) -> PhantomTissue:
     """:func:`tissue_model` of the task's known phantom (a
     :class:`~suture_bt.geometry.PhantomModel`: its pose, port pairs and block) seen from
-    ``eye`` (world): the localiser's ``tissue``."""
+    ``eye`` (world), with the phantom's solid: the localiser's ``tissue``."""
     pairs = [
         tuple((p.position, p.normal) for p in phantom.pair(k))
         for k in range(1, phantom.num_pairs + 1)
     ]
-    return tissue_model(phantom.T_world_phantom, pairs, eye, (TISSUE_X, TISSUE_Y))
+    inside = tissue_model(phantom.T_world_phantom, pairs, eye, (TISSUE_X, TISSUE_Y))
+    return PhantomTissue(inside, solid_pieces(phantom))
 
 
 #: How far back along the line of sight (m) and in how many steps the tissue is looked for.
