@@ -77,6 +77,21 @@ def test_one_start_lies_near_the_true_pose():
         assert near.any(), (deg, np.min(dpos), np.min(dang))
 
 
+def test_an_end_the_other_eye_does_not_see_at_the_surface_is_no_entry():
+    """The caller's check on the entry point (the other eye sees a wire end there): asked of
+    each end's surface point, and an end it refuses gives no start."""
+    T, cut, ends, X = _entering(110.0)
+    asked = []
+
+    def only_the_true_entry(p: np.ndarray) -> bool:
+        asked.append(p)
+        return bool(np.linalg.norm(p - X) < 1e-6)
+
+    kept = entry_starts(ends, CAM, cut, MODEL, only_the_true_entry)
+    assert len(asked) >= 1 and 0 < len(kept) < len(entry_starts(ends, CAM, cut, MODEL))
+    assert entry_starts(ends, CAM, cut, MODEL, lambda p: False).shape == (0, 4, 4)
+
+
 def test_no_tissue_on_either_line_of_sight_gives_no_start():
     T, _, ends, _ = _entering(110.0)
     behind = _cut([(np.array([0.0, 0.0, -0.05]), np.array([0.0, 0.0, 1.0]))])

@@ -8,10 +8,16 @@ and the search can settle on a pose that spans the seen piece with its whole arc
 reached it). The known tissue says where that point is: the outline end's line of sight meets
 the tissue's surface there. These starts are circles of the needle's radius from a point on the
 other end's line of sight through that entry point, over how much of the arc is seen and the
-circle's turn about the chord, with either end of the needle outside.
+circle's turn about the chord, with either end of the needle outside. An end is taken as an
+entry only where the other eye sees an end of the wire at that surface point too: the ray of
+an end in front of the tissue meets the tissue far behind the needle, a point the other eye
+sees elsewhere (without the check a held needle 40 mm from the eyes was answered from such starts
+with a 23° spread, development `held_start` #6).
 """
 
 from __future__ import annotations
+
+from collections.abc import Callable
 
 import numpy as np
 
@@ -47,16 +53,22 @@ def surface_hit(cut: TissueCut, ray: np.ndarray) -> float:
 
 
 def entry_starts(
-    ends: tuple[np.ndarray, np.ndarray], cam, cut: TissueCut, model: NeedleModel
+    ends: tuple[np.ndarray, np.ndarray],
+    cam,
+    cut: TissueCut,
+    model: NeedleModel,
+    seen_there: Callable[[np.ndarray], bool] | None = None,
 ) -> np.ndarray:
     """Left-camera poses (K, 4, 4) that enter the tissue at one outline end's surface point
     and leave a needle end on the other end's line of sight (``ends``: two left-image pixels;
-    each is tried as the entry). Empty when neither line of sight meets the tissue."""
+    each is tried as the entry, when ``seen_there`` (a left-camera point → whether the other
+    eye sees an end of the wire there; None: not asked) says so). Empty when no end
+    qualifies."""
     rays = [_pixel_ray(cam, e) for e in ends]
     out = []
     for entry, other in ((0, 1), (1, 0)):
         hit = surface_hit(cut, rays[entry])
-        if not np.isfinite(hit):
+        if not np.isfinite(hit) or (seen_there is not None and not seen_there(hit * rays[entry])):
             continue
         X, r = hit * rays[entry], rays[other]
         for seen in np.radians(SEEN_ARC_DEG):

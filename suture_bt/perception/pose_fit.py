@@ -196,10 +196,11 @@ class PoseFitter:
         # The tissue hides the arc inside it: the known solid, and for a needle in a port the
         # space below the port's surface.
         ports = port_planes(priors)
+        rays.cut = TissueCut.from_ports(ports, self.stereo.left.T_cam_world, self.model)
         solid = list(self.tissue_solid or ())
         pieces = ([ports] if ports else []) + solid
         depths = [0.0] * (len(pieces) - len(solid)) + [self.solid_depth] * len(solid)
-        rays.cut = TissueCut.from_pieces(pieces, self.stereo.left.T_cam_world, self.model, depths)
+        cut = TissueCut.from_pieces(pieces, self.stereo.left.T_cam_world, self.model, depths)
         nl = len(el)
         coarse = rays.subset(balanced(nl, len(er), self.coarse_points_per_eye, rng))
         mid = rays.subset(balanced(nl, len(er), self.mid_points_per_eye, rng))
@@ -240,10 +241,15 @@ class PoseFitter:
             parts.append(pose_to_params(np.asarray(warm_start)[None], cam, self.model))
         if seeds is not None and len(seeds):
             parts.append(lowest(pose_to_params(np.asarray(seeds), cam, self.model), self.n_keep))
-        if self.tissue_solid and rays.cut is not None:
-            # The outline may end where the wire enters the tissue (own rng: the same draws).
-            ends = farthest_pair(el, np.random.default_rng(self.seed + 1))
-            entry = entry_starts(ends, cam, rays.cut, self.model)
+        if self.tissue_solid and cut is not None:
+            # The solid hides the arc from here on: the image's starts were chosen without it
+            # (with it, far starts half inside the tissue crowded out the right ones on
+            # development scenes of a free needle). The outline may end where the wire enters
+            # the tissue (own rng: the same draws).
+            rays.cut = coarse.cut = mid.cut = cut
+            own = np.random.default_rng(self.seed + 1)
+            ends, right_ends = farthest_pair(el, own), farthest_pair(er, own)
+            entry = entry_starts(ends, cam, cut, self.model, self._at_right_end(right_ends))
             if len(entry):
                 parts.append(
                     lowest(pose_to_params(entry, cam, self.model), self.n_keep_alternative)
@@ -386,6 +392,18 @@ class PoseFitter:
                 near = np.concatenate([near, np.zeros(keep.sum(), bool)])
             b, ok, misses = choose_answer(self._world(xf), cf, priors, self.model)
         return xf, cf, b, ok, misses, near
+
+    def _at_right_end(self, right_ends, reach_px: float = 3.0):
+        """Whether a left-camera point projects within ``reach_px`` of either end of the right
+        mask (its two mutually farthest edge points)."""
+        st = self.stereo
+        T = st.left.T_world_cam
+
+        def seen(p: np.ndarray) -> bool:
+            uv = st.right.project(T[:3, :3] @ p + T[:3, 3])[0]
+            return min(np.linalg.norm(uv - e) for e in right_ends) <= reach_px
+
+        return seen
 
     def _world(self, x: np.ndarray) -> np.ndarray:
         """World poses (K, 4, 4) of parameter rows (priors are in the world frame)."""
