@@ -126,11 +126,14 @@ def _root(A, B, C, u, v):
 
 
 @njit(cache=True)
-def _height(A, B, C, G, c, s):
+def _height(A, B, C, G, act, c, s):
     """How far outside the tissue the arc point at (cos, sin) = (c, s) is: over the pieces
-    (plane offsets G), the least of each piece's highest plane height (< 0: hidden)."""
+    (plane offsets G) the circle reaches (``act``), the least of each piece's highest plane
+    height (< 0: hidden)."""
     out = np.inf
     for g in range(G.shape[0] - 1):
+        if not act[g]:
+            continue
         top = -np.inf
         for p in range(G[g], G[g + 1]):
             top = max(top, A[p] * c + B[p] * s + C[p])
@@ -139,9 +142,11 @@ def _height(A, B, C, G, c, s):
 
 
 @njit(cache=True)
-def _deep(A, B, C, G, D, c, s):
+def _deep(A, B, C, G, act, D, c, s):
     """Whether the arc point at (cos, sin) = (c, s) is at least D[g] inside some piece g."""
     for g in range(G.shape[0] - 1):
+        if not act[g]:
+            continue
         top = -np.inf
         for p in range(G[g], G[g + 1]):
             top = max(top, A[p] * c + B[p] * s + C[p])
@@ -151,17 +156,21 @@ def _deep(A, B, C, G, D, c, s):
 
 
 @njit(cache=True)
-def _boundary(A, B, C, G, u, v):
-    """Where 'inside a piece' changes within [u, v]: among the planes' roots there, the one
-    where the tissue height (:func:`_height`) is nearest zero."""
+def _boundary(A, B, C, G, act, u, v):
+    """Where 'inside a piece' changes within [u, v]: among the roots there of the planes of
+    the pieces the circle reaches, the one where the tissue height (:func:`_height`) is
+    nearest zero."""
     best, arg = np.inf, 0.5 * (u + v)
-    for q in range(A.shape[0]):
-        th = _root(A[q], B[q], C[q], u, v)
-        if not math.isfinite(th):
+    for g in range(G.shape[0] - 1):
+        if not act[g]:
             continue
-        g = _height(A, B, C, G, math.cos(th), math.sin(th))
-        if abs(g) < best:
-            best, arg = abs(g), th
+        for q in range(G[g], G[g + 1]):
+            th = _root(A[q], B[q], C[q], u, v)
+            if not math.isfinite(th):
+                continue
+            h = _height(A, B, C, G, act, math.cos(th), math.sin(th))
+            if abs(h) < best:
+                best, arg = abs(h), th
     return arg
 
 
@@ -170,10 +179,12 @@ def hidden_spans(T, P, N, G, D, rad, lo, hi, shift, grid):
     """Spans (K, 2, 2) of arc angle inside the tissue (planes: points P, normals N; Q each;
     pieces: plane offsets G, depths D) for poses T (K, 4, 4): found on ``grid`` (angles
     lo..hi), kept where a sample reaches a piece's depth, their ends solved exactly, those
-    meeting the seen arc set back by ``shift`` (rad) into it. NaN rows: no span."""
-    K, Q, S = T.shape[0], P.shape[0], grid.shape[0]
+    meeting the seen arc set back by ``shift`` (rad) into it. NaN rows: no span. A piece
+    with a plane the pose's whole circle lies outside of is skipped (most poses: all)."""
+    K, Q, S, NG = T.shape[0], P.shape[0], grid.shape[0], G.shape[0] - 1
     out = np.full((K, 2, 2), np.nan)
     A, B, C = np.empty(Q), np.empty(Q), np.empty(Q)
+    act = np.empty(NG, np.bool_)
     gc, gs = np.cos(grid), np.sin(grid)
     for k in range(K):
         for q in range(Q):
@@ -183,17 +194,27 @@ def hidden_spans(T, P, N, G, D, rad, lo, hi, shift, grid):
                 b += N[q, m] * T[k, m, 1]
                 c += N[q, m] * (T[k, m, 3] - P[q, m])
             A[q], B[q], C[q] = rad * a, rad * b, c
+        any_act = False
+        for g in range(NG):
+            act[g] = True
+            for q in range(G[g], G[g + 1]):
+                if C[q] - math.hypot(A[q], B[q]) >= 0.0:
+                    act[g] = False
+                    break
+            any_act = any_act or act[g]
+        if not any_act:
+            continue
         n, prev, start, deep = 0, False, lo, False
         for i in range(S):
-            hid = _height(A, B, C, G, gc[i], gs[i]) < 0.0
+            hid = _height(A, B, C, G, act, gc[i], gs[i]) < 0.0
             if hid and not prev:
-                start = lo if i == 0 else _boundary(A, B, C, G, grid[i - 1], grid[i])
+                start = lo if i == 0 else _boundary(A, B, C, G, act, grid[i - 1], grid[i])
                 deep = False
             if hid:
-                deep = deep or _deep(A, B, C, G, D, gc[i], gs[i])
+                deep = deep or _deep(A, B, C, G, act, D, gc[i], gs[i])
             if prev and not hid and n < 2 and deep:
                 out[k, n, 0] = start
-                out[k, n, 1] = _boundary(A, B, C, G, grid[i - 1], grid[i])
+                out[k, n, 1] = _boundary(A, B, C, G, act, grid[i - 1], grid[i])
                 n += 1
             prev = hid
         if prev and n < 2 and deep:
