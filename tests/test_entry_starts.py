@@ -6,12 +6,13 @@ import pytest
 from perception_helpers import stereo
 from test_pose_fit import MODEL
 
-from suture_bt.perception.entry_starts import entry_starts, surface_hit
+from suture_bt.perception.entry_starts import entry_starts, seen_at_right_end, surface_hit
 from suture_bt.perception.needle_projection import project_cam, transform_points
 from suture_bt.perception.tissue_cut import TissueCut
 from suture_bt.transforms import make_transform, rpy_to_matrix
 
-CAM = stereo(1920, 1080).left
+STEREO = stereo(1920, 1080)
+CAM = STEREO.left
 
 
 def _cut(*pieces) -> TissueCut:
@@ -114,3 +115,15 @@ def test_a_needle_going_into_the_ridge_is_found_from_the_tissue_alone():
     assert pos < 0.5 and ang < 2.0
     with pytest.raises(NeedleNotFound):
         NeedleLocalizer(st, tissue=tissue.inside).localize(left, right)
+
+
+def test_the_right_eye_must_see_a_wire_end_at_the_entry_point():
+    """A point on the left sight line at the right mask's end passes; the same sight line's
+    point 13 mm deeper (a tissue hit behind a needle 54 mm away: 5 px of disparity) does not."""
+    ray = np.array([0.05, 0.02, 1.0]) / np.linalg.norm([0.05, 0.02, 1.0])
+    near, far = 0.054 * ray / ray[2], 0.067 * ray / ray[2]
+    T = STEREO.left.T_world_cam
+    end = STEREO.right.project(T[:3, :3] @ near + T[:3, 3])[0]
+    seen = seen_at_right_end(STEREO, [end, end + (200.0, 0.0)])
+    assert seen(near)
+    assert not seen(far)

@@ -28,6 +28,10 @@ from suture_bt.perception.tissue_cut import TissueCut
 SEEN_ARC_DEG = (25.0, 45.0, 65.0, 85.0, 105.0)
 #: Turns of the circle about its chord.
 N_TURNS = 12
+#: An entry point must project within this (px) of an end of the right eye's mask. A held
+#: needle's end 54 mm away whose sight line met the tissue 13 mm behind it projected 5 px off
+#: (development `held_start` #6 of seed 6173); the true entry of `occluded` #9, 0.4 px.
+RIGHT_END_PX = 3.0
 
 
 def surface_hit(cut: TissueCut, ray: np.ndarray) -> float:
@@ -79,6 +83,20 @@ def entry_starts(
         return np.zeros((0, 4, 4))
     poses = np.concatenate(out)
     return np.concatenate([poses, model.swapped(poses)])
+
+
+def seen_at_right_end(
+    stereo, right_ends, reach_px: float = RIGHT_END_PX
+) -> Callable[[np.ndarray], bool]:
+    """:func:`entry_starts`' check: whether a left-camera point projects within ``reach_px``
+    of either end of the right eye's mask (its two mutually farthest edge points)."""
+    T = stereo.left.T_world_cam
+
+    def seen(p: np.ndarray) -> bool:
+        uv = stereo.right.project(T[:3, :3] @ p + T[:3, 3])[0]
+        return min(float(np.linalg.norm(uv - e)) for e in right_ends) <= reach_px
+
+    return seen
 
 
 def _pixel_ray(cam, uv: np.ndarray) -> np.ndarray:

@@ -41,7 +41,7 @@ from suture_bt.perception.edge_samples import (  # noqa: F401 - mask_ends re-exp
     mask_ends,
     subsample,
 )
-from suture_bt.perception.entry_starts import entry_starts
+from suture_bt.perception.entry_starts import entry_starts, seen_at_right_end
 from suture_bt.perception.fit_result import PoseFitResult
 from suture_bt.perception.fit_solver import (  # noqa: F401 - re-exported
     FD_STEPS,
@@ -242,14 +242,15 @@ class PoseFitter:
         if seeds is not None and len(seeds):
             parts.append(lowest(pose_to_params(np.asarray(seeds), cam, self.model), self.n_keep))
         if self.tissue_solid and cut is not None:
-            # The solid hides the arc from here on: the image's starts were chosen without it
-            # (with it, far starts half inside the tissue crowded out the right ones on
-            # development scenes of a free needle). The outline may end where the wire enters
-            # the tissue (own rng: the same draws).
+            # The solid hides the arc from here on: the image's first starts were chosen
+            # without it (with it, far starts half inside the tissue crowded out the right
+            # ones on development scenes of a free needle). The outline may end where the wire
+            # enters the tissue (own rng: the same draws).
             rays.cut = coarse.cut = mid.cut = cut
             own = np.random.default_rng(self.seed + 1)
             ends, right_ends = farthest_pair(el, own), farthest_pair(er, own)
-            entry = entry_starts(ends, cam, cut, self.model, self._at_right_end(right_ends))
+            at_end = seen_at_right_end(self.stereo, right_ends)
+            entry = entry_starts(ends, cam, cut, self.model, at_end)
             if len(entry):
                 parts.append(
                     lowest(pose_to_params(entry, cam, self.model), self.n_keep_alternative)
@@ -392,18 +393,6 @@ class PoseFitter:
                 near = np.concatenate([near, np.zeros(keep.sum(), bool)])
             b, ok, misses = choose_answer(self._world(xf), cf, priors, self.model)
         return xf, cf, b, ok, misses, near
-
-    def _at_right_end(self, right_ends, reach_px: float = 3.0):
-        """Whether a left-camera point projects within ``reach_px`` of either end of the right
-        mask (its two mutually farthest edge points)."""
-        st = self.stereo
-        T = st.left.T_world_cam
-
-        def seen(p: np.ndarray) -> bool:
-            uv = st.right.project(T[:3, :3] @ p + T[:3, 3])[0]
-            return min(np.linalg.norm(uv - e) for e in right_ends) <= reach_px
-
-        return seen
 
     def _world(self, x: np.ndarray) -> np.ndarray:
         """World poses (K, 4, 4) of parameter rows (priors are in the world frame)."""
