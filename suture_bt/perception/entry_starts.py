@@ -11,8 +11,8 @@ other end's line of sight through that entry point, over how much of the arc is 
 circle's turn about the chord, with either end of the needle outside. An end is taken as an
 entry only where the other eye sees an end of the wire at that surface point too: the ray of
 an end in front of the tissue meets the tissue far behind the needle, a point the other eye
-sees elsewhere (without the check a held needle 40 mm from the eyes was answered from such starts
-with a 23° spread, development `held_start` #6).
+sees elsewhere (without the check, such starts led the fit of a held needle whose end was 54 mm
+from the eyes to a loose pose, refused with a 23° spread: development `held_start` #6).
 """
 
 from __future__ import annotations
