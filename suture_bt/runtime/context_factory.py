@@ -22,7 +22,8 @@ def build_context(world, oracle: bool = False, localizer=None) -> TaskContext:
     only the tissue where that phantom is may hide the needle's unseen part: without it any
     tissue-coloured pixel may, and a fit that explains a needle piece while its hidden part
     swings over open tissue passes the exposure check (session 18: answers 10-20° off adopted
-    in a campaign with dim lighting)."""
+    in a campaign with dim lighting). Its solid also hides the arc inside it in every fit, so a
+    needle going into a port ends its seen wire at the surface (session 24)."""
     views = views_of(world)
     if localizer is None and not oracle:
         stereo = views.camera.model
