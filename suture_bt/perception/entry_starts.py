@@ -22,6 +22,7 @@ from collections.abc import Callable
 import numpy as np
 
 from suture_bt.geometry import NeedleModel
+from suture_bt.perception.needle_projection import pixel_rays
 from suture_bt.perception.tissue_cut import TissueCut
 
 #: Seen arc (deg) from the outside end to the entry point: the starts' chord lengths.
@@ -68,7 +69,7 @@ def entry_starts(
     each is tried as the entry, when ``seen_there`` (a left-camera point → whether the other
     eye sees an end of the wire there; None: not asked) says so). Empty when no end
     qualifies."""
-    rays = [_pixel_ray(cam, e) for e in ends]
+    rays = pixel_rays(cam, np.stack([np.asarray(e, float) for e in ends]))
     out = []
     for entry, other in ((0, 1), (1, 0)):
         hit = surface_hit(cut, rays[entry])
@@ -97,11 +98,6 @@ def seen_at_right_end(
         return min(float(np.linalg.norm(uv - e)) for e in right_ends) <= reach_px
 
     return seen
-
-
-def _pixel_ray(cam, uv: np.ndarray) -> np.ndarray:
-    d = np.array([(uv[0] - cam.cx) / cam.fx, (uv[1] - cam.cy) / cam.fy, 1.0])
-    return d / np.linalg.norm(d)
 
 
 def _depths_at(X: np.ndarray, r: np.ndarray, chord: float) -> list[float]:

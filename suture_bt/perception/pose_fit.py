@@ -197,10 +197,6 @@ class PoseFitter:
         # space below the port's surface.
         ports = port_planes(priors)
         rays.cut = TissueCut.from_ports(ports, self.stereo.left.T_cam_world, self.model)
-        solid = list(self.tissue_solid or ())
-        pieces = ([ports] if ports else []) + solid
-        depths = [0.0] * (len(pieces) - len(solid)) + [self.solid_depth] * len(solid)
-        cut = TissueCut.from_pieces(pieces, self.stereo.left.T_cam_world, self.model, depths)
         nl = len(el)
         coarse = rays.subset(balanced(nl, len(er), self.coarse_points_per_eye, rng))
         mid = rays.subset(balanced(nl, len(er), self.mid_points_per_eye, rng))
@@ -241,7 +237,8 @@ class PoseFitter:
             parts.append(pose_to_params(np.asarray(warm_start)[None], cam, self.model))
         if seeds is not None and len(seeds):
             parts.append(lowest(pose_to_params(np.asarray(seeds), cam, self.model), self.n_keep))
-        if self.tissue_solid and cut is not None:
+        if self.tissue_solid:
+            cut = self._with_solid(ports)
             # The solid hides the arc from here on: the image's first starts were chosen
             # without it (with it, far starts half inside the tissue crowded out the right
             # ones on development scenes of a free needle). The outline may end where the wire
@@ -393,6 +390,14 @@ class PoseFitter:
                 near = np.concatenate([near, np.zeros(keep.sum(), bool)])
             b, ok, misses = choose_answer(self._world(xf), cf, priors, self.model)
         return xf, cf, b, ok, misses, near
+
+    def _with_solid(self, ports) -> TissueCut:
+        """The cut of the port priors' planes (depth 0) and the known solid's pieces (each
+        ``solid_depth`` deep)."""
+        solid = list(self.tissue_solid)
+        pieces = ([ports] if ports else []) + solid
+        depths = [0.0] * (len(pieces) - len(solid)) + [self.solid_depth] * len(solid)
+        return TissueCut.from_pieces(pieces, self.stereo.left.T_cam_world, self.model, depths)
 
     def _world(self, x: np.ndarray) -> np.ndarray:
         """World poses (K, 4, 4) of parameter rows (priors are in the world frame)."""

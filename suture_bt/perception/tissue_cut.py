@@ -126,11 +126,11 @@ def _root(A, B, C, u, v):
 
 
 @njit(cache=True)
-def _height(A, B, C, G, act, c, s):
-    """How far outside the tissue the arc point at (cos, sin) = (c, s) is: over the pieces
-    (plane offsets G) the circle reaches (``act``), the least of each piece's highest plane
-    height (< 0: hidden)."""
-    out = np.inf
+def _sample(A, B, C, G, act, D, c, s):
+    """The arc point at (cos, sin) = (c, s) against the pieces (plane offsets G) the circle
+    reaches (``act``): how far outside the tissue it is (the least of each piece's highest
+    plane height; < 0: hidden), and whether it is at least D[g] inside some piece g."""
+    out, deep = np.inf, False
     for g in range(G.shape[0] - 1):
         if not act[g]:
             continue
@@ -138,27 +138,14 @@ def _height(A, B, C, G, act, c, s):
         for p in range(G[g], G[g + 1]):
             top = max(top, A[p] * c + B[p] * s + C[p])
         out = min(out, top)
-    return out
+        deep = deep or (top < 0.0 and top <= -D[g])
+    return out, deep
 
 
 @njit(cache=True)
-def _deep(A, B, C, G, act, D, c, s):
-    """Whether the arc point at (cos, sin) = (c, s) is at least D[g] inside some piece g."""
-    for g in range(G.shape[0] - 1):
-        if not act[g]:
-            continue
-        top = -np.inf
-        for p in range(G[g], G[g + 1]):
-            top = max(top, A[p] * c + B[p] * s + C[p])
-        if top < 0.0 and top <= -D[g]:
-            return True
-    return False
-
-
-@njit(cache=True)
-def _boundary(A, B, C, G, act, u, v):
+def _boundary(A, B, C, G, act, D, u, v):
     """Where 'inside a piece' changes within [u, v]: among the roots there of the planes of
-    the pieces the circle reaches, the one where the tissue height (:func:`_height`) is
+    the pieces the circle reaches, the one where the tissue height (:func:`_sample`) is
     nearest zero."""
     best, arg = np.inf, 0.5 * (u + v)
     for g in range(G.shape[0] - 1):
@@ -168,7 +155,7 @@ def _boundary(A, B, C, G, act, u, v):
             th = _root(A[q], B[q], C[q], u, v)
             if not math.isfinite(th):
                 continue
-            h = _height(A, B, C, G, act, math.cos(th), math.sin(th))
+            h = _sample(A, B, C, G, act, D, math.cos(th), math.sin(th))[0]
             if abs(h) < best:
                 best, arg = abs(h), th
     return arg
@@ -206,15 +193,16 @@ def hidden_spans(T, P, N, G, D, rad, lo, hi, shift, grid):
             continue
         n, prev, start, deep = 0, False, lo, False
         for i in range(S):
-            hid = _height(A, B, C, G, act, gc[i], gs[i]) < 0.0
+            h, deep_here = _sample(A, B, C, G, act, D, gc[i], gs[i])
+            hid = h < 0.0
             if hid and not prev:
-                start = lo if i == 0 else _boundary(A, B, C, G, act, grid[i - 1], grid[i])
+                start = lo if i == 0 else _boundary(A, B, C, G, act, D, grid[i - 1], grid[i])
                 deep = False
             if hid:
-                deep = deep or _deep(A, B, C, G, act, D, gc[i], gs[i])
+                deep = deep or deep_here
             if prev and not hid and n < 2 and deep:
                 out[k, n, 0] = start
-                out[k, n, 1] = _boundary(A, B, C, G, act, grid[i - 1], grid[i])
+                out[k, n, 1] = _boundary(A, B, C, G, act, D, grid[i - 1], grid[i])
                 n += 1
             prev = hid
         if prev and n < 2 and deep:
