@@ -54,16 +54,32 @@ def test_arc_offsets_are_zero_on_the_arc_and_measure_the_miss_off_it():
     assert np.isclose(arc_distance(past_base, T, MODEL), 0.002)
 
 
-def test_the_compiled_term_measures_what_arc_offsets_does():
-    """PriorTerm's compiled offsets equal the reference :func:`arc_offsets` for points on,
-    off, and past either end of the arc, over many poses."""
+def _numpy_arc_offsets(T: np.ndarray, points: np.ndarray) -> np.ndarray:
+    """The nearest-arc-point offsets written as plain numpy (the reference of the compiled
+    loop): the point into each needle frame, its angle clamped to the circle within the span,
+    else the nearer end, the offset back in the pose's frame."""
+    R, t = T[:, :3, :3], T[:, :3, 3]
+    p = np.einsum("kji,kpj->kpi", R, points[None] - t[:, None])
+    theta = np.arctan2(p[..., 1], p[..., 0])
+    on_circle = MODEL.radius * np.stack([np.cos(theta), np.sin(theta), 0 * theta], -1)
+    ends = np.stack([MODEL.tip, MODEL.base])
+    end = ends[np.argmin(np.linalg.norm(p[..., None, :] - ends, axis=-1), -1)]
+    inside = (theta >= MODEL.tip_angle) & (theta <= MODEL.base_angle)
+    return np.einsum("kij,kpj->kpi", R, np.where(inside[..., None], on_circle, end) - p)
+
+
+def test_the_compiled_offsets_equal_the_numpy_reference():
+    """:func:`arc_offsets` (compiled) and PriorTerm's misses equal the numpy reference for
+    points on, off, and past either end of the arc, over many poses."""
     rng = np.random.default_rng(4)
     T = np.stack([random_needle_pose(rng, 0.03, 0.2) for _ in range(9)])
     centre = T[0, :3, 3]
     points = centre + rng.normal(0.0, 0.012, (40, 3))
+    reference = _numpy_arc_offsets(T, points)
+    np.testing.assert_allclose(arc_offsets(T, points, MODEL), reference, atol=1e-15)
     priors = [HeldPrior("psm1", p, 0.002) for p in points]
     term = PriorTerm(priors, np.eye(4), MODEL)
-    np.testing.assert_allclose(term.misses(T) * 0.002, arc_offsets(T, points, MODEL), atol=1e-15)
+    np.testing.assert_allclose(term.misses(T) * 0.002, reference, atol=1e-15)
 
 
 def test_prior_term_counts_a_miss_of_one_tolerance_as_prior_px():

@@ -13,14 +13,18 @@ spread.
 
 from __future__ import annotations
 
-import math
 from collections.abc import Sequence
 
 import numpy as np
-from numba import njit
 
 from suture_bt.geometry import NeedleModel
-from suture_bt.perception.needle_prior import HeldPrior, NeedlePrior, PortPrior, place_offsets
+from suture_bt.perception.needle_prior import (
+    HeldPrior,
+    NeedlePrior,
+    PortPrior,
+    arc_offsets,
+    place_offsets,
+)
 
 #: Pixels a miss of one tolerance counts as in the polish (about the spread of the edge
 #: residuals there), so a prior weighs like an edge point as well placed as its tolerance says.
@@ -56,18 +60,13 @@ class PriorTerm:
         #: Held places: (index of the pinch point, arc angle, tolerance along the arc).
         self.places = places
         self.model = model
-        self._ends = np.stack([model.tip, model.base]).astype(np.float64)
 
     def __bool__(self) -> bool:
         return len(self.points) > 0
 
     def misses(self, T: np.ndarray) -> np.ndarray:
-        """Offsets (K, P, 3) over each prior's tolerance (:func:`needle_prior.arc_offsets`,
-        compiled: the fit calls this on small batches many times)."""
-        m = self.model
-        T = np.ascontiguousarray(T, dtype=np.float64)
-        off = _arc_offsets(T, self.points, m.radius, m.tip_angle, m.base_angle, self._ends)
-        return off / self.tolerance[None, :, None]
+        """Offsets (K, P, 3) over each prior's tolerance (:func:`needle_prior.arc_offsets`)."""
+        return arc_offsets(T, self.points, self.model) / self.tolerance[None, :, None]
 
     def slides(self, T: np.ndarray) -> np.ndarray:
         """Each held place's signed slide (K, Q) over its tolerance: the pinch point's angle
@@ -105,38 +104,6 @@ class HeldPlaceTerm(PriorTerm):
 
     def column_weights(self, n_edge: int) -> np.ndarray:
         return np.full(len(self.places), PRIOR_WEIGHT)
-
-
-@njit(cache=True)
-def _arc_offsets(T, points, radius, tip_angle, base_angle, ends):
-    """:func:`needle_prior.arc_offsets` per pose and point in one compiled loop: the vector
-    (pose frame) from each point to the nearest point of the arc (on the circle within the
-    span, else the nearer end; ``ends`` = tip, base in the needle frame)."""
-    K, P = T.shape[0], points.shape[0]
-    out = np.empty((K, P, 3))
-    for k in range(K):
-        for q in range(P):
-            d0 = points[q, 0] - T[k, 0, 3]
-            d1 = points[q, 1] - T[k, 1, 3]
-            d2 = points[q, 2] - T[k, 2, 3]
-            # the point in the needle frame: Rᵀ (point - t)
-            p0 = T[k, 0, 0] * d0 + T[k, 1, 0] * d1 + T[k, 2, 0] * d2
-            p1 = T[k, 0, 1] * d0 + T[k, 1, 1] * d1 + T[k, 2, 1] * d2
-            p2 = T[k, 0, 2] * d0 + T[k, 1, 2] * d1 + T[k, 2, 2] * d2
-            theta = math.atan2(p1, p0)
-            if tip_angle <= theta <= base_angle:
-                n0, n1, n2 = radius * math.cos(theta), radius * math.sin(theta), 0.0
-            else:
-                e = 0
-                dt = (p0 - ends[0, 0]) ** 2 + (p1 - ends[0, 1]) ** 2 + (p2 - ends[0, 2]) ** 2
-                db = (p0 - ends[1, 0]) ** 2 + (p1 - ends[1, 1]) ** 2 + (p2 - ends[1, 2]) ** 2
-                if db < dt:
-                    e = 1
-                n0, n1, n2 = ends[e, 0], ends[e, 1], ends[e, 2]
-            v0, v1, v2 = n0 - p0, n1 - p1, n2 - p2
-            for i in range(3):
-                out[k, q, i] = T[k, i, 0] * v0 + T[k, i, 1] * v1 + T[k, i, 2] * v2
-    return out
 
 
 def prior_information(term: PriorTerm | None, T: np.ndarray, T6: np.ndarray, steps) -> np.ndarray:
