@@ -24,6 +24,7 @@ tip choice is made later from colour, so the pose prior's angle is taken modulo 
 
 from __future__ import annotations
 
+import functools
 import math
 from collections.abc import Sequence
 from dataclasses import dataclass
@@ -47,8 +48,15 @@ def arc_offsets(T: np.ndarray, points: np.ndarray, model: NeedleModel) -> np.nda
     fit asks this of small batches many times (as numpy calls, 5 ms of a call with priors)."""
     T = np.ascontiguousarray(np.reshape(T, (-1, 4, 4)), dtype=np.float64)
     points = np.ascontiguousarray(np.reshape(points, (-1, 3)), dtype=np.float64)
+    return _arc_offsets(T, points, model.radius, model.tip_angle, model.base_angle, _ends(model))
+
+
+@functools.lru_cache(maxsize=8)
+def _ends(model: NeedleModel) -> np.ndarray:
+    """Tip and base (2, 3) in the needle frame (read-only: shared by every call)."""
     ends = np.stack([model.tip, model.base]).astype(np.float64)
-    return _arc_offsets(T, points, model.radius, model.tip_angle, model.base_angle, ends)
+    ends.flags.writeable = False
+    return ends
 
 
 @njit(cache=True)

@@ -100,12 +100,19 @@ class TissueCut:
     def spans_and_derivatives(self, T: np.ndarray, T6: np.ndarray, steps) -> tuple:
         """The spans at T (K, 4, 4) and their forward differences (K, 6, MAX_SPANS, 2) in the
         six parameters, from the poses T6 (K, 6, 4, 4) stepped by ``steps`` (0 where a span
-        appears or goes)."""
+        appears or goes). Only the poses with a span at T are stepped: a difference from no
+        span is 0 anyway (most poses have none)."""
+        T = np.reshape(T, (-1, 4, 4))
         K = len(T)
-        both = self.spans(np.concatenate([np.reshape(T, (K, 4, 4)), T6.reshape(-1, 4, 4)]))
-        s0, s6 = both[:K], both[K:].reshape(K, 6, MAX_SPANS, 2)
-        d = (s6 - s0[:, None]) / np.asarray(steps, float)[None, :, None, None]
-        return s0, np.where(np.isfinite(d), d, 0.0)
+        s0 = self.spans(T)
+        d = np.zeros((K, 6, MAX_SPANS, 2))
+        cut = np.isfinite(s0).any(axis=(1, 2))
+        if cut.any():
+            s6 = self.spans(np.reshape(T6, (K, 6, 4, 4))[cut].reshape(-1, 4, 4))
+            s6 = s6.reshape(-1, 6, MAX_SPANS, 2)
+            dk = (s6 - s0[cut][:, None]) / np.asarray(steps, float)[None, :, None, None]
+            d[cut] = np.where(np.isfinite(dk), dk, 0.0)
+        return s0, d
 
 
 @njit(cache=True)
