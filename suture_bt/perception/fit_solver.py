@@ -76,11 +76,14 @@ def levenberg_marquardt(
     def extra_residuals(T):
         return np.concatenate([e(T) for e in extras], 1)
 
-    def with_steps(x):
+    def with_steps(x, stepped: bool = True):
         """Poses of x and of x stepped by FD_STEPS in each parameter, in one batch (each
         pose's bits do not depend on its batch): (K, 4, 4), (K, 6, 4, 4), and the extra
-        terms' residuals at the stepped poses (K, 6, M) (None without extra terms)."""
+        terms' residuals at the stepped poses (K, 6, M) (None without extra terms or
+        ``stepped``: the last trial's derivatives are never used)."""
         P = params_to_pose(x[:, None, :] + _STEPS[None], cam, model)
+        if not stepped:
+            return np.ascontiguousarray(P[:, 0]), None, None
         E6 = extra_residuals(P[:, 1:].reshape(-1, 4, 4)).reshape(K, 6, -1) if extras else None
         return np.ascontiguousarray(P[:, 0]), P[:, 1:], E6
 
@@ -96,7 +99,7 @@ def levenberg_marquardt(
     r, theta, cs, A_edge, g_edge = evaluate(T, T6)
     cost = robust_cost(r, sigma, colw, loss)
     lam = np.full(K, 1e-2)
-    for _ in range(iters):
+    for it in range(iters):
         if not np.isfinite(cost).any():
             break
         A, g = A_edge, g_edge
@@ -120,10 +123,14 @@ def levenberg_marquardt(
         except np.linalg.LinAlgError:
             break
         xn = x + delta
-        Tn, T6n, E6n = with_steps(xn)
+        last = it == iters - 1  # its trial's residuals decide; its derivatives are unused
+        Tn, T6n, E6n = with_steps(xn, stepped=not last)
         rn, thn, csn, An, gn = evaluate(Tn, T6n, theta, cs)
         cn = robust_cost(rn, sigma, colw, loss)
         better = cn < cost
+        if last:
+            x[better], cost[better] = xn[better], cn[better]
+            break
         x[better], T[better], r[better], theta[better], cost[better] = (
             xn[better],
             Tn[better],
