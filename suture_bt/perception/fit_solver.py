@@ -131,17 +131,21 @@ def levenberg_marquardt(
         if last:
             x[better], cost[better] = xn[better], cn[better]
             break
-        x[better], T[better], r[better], theta[better], cost[better] = (
-            xn[better],
-            Tn[better],
-            rn[better],
-            thn[better],
-            cn[better],
-        )
-        A_edge[better], g_edge[better], T6[better] = An[better], gn[better], T6n[better]
-        cs[:, better] = csn[:, better]
-        if extras:
-            E6[better] = E6n[better]
+        if better.all():  # every trial taken (common early on): no row-wise copies
+            x, T, r, theta, cost, cs = xn, Tn, rn, thn, cn, csn
+            A_edge, g_edge, T6, E6 = An, gn, T6n, E6n
+        elif better.any():
+            x[better], T[better], r[better], theta[better], cost[better] = (
+                xn[better],
+                Tn[better],
+                rn[better],
+                thn[better],
+                cn[better],
+            )
+            A_edge[better], g_edge[better], T6[better] = An[better], gn[better], T6n[better]
+            cs[:, better] = csn[:, better]
+            if extras:
+                E6[better] = E6n[better]
         lam = np.where(better, lam / 3.0, lam * 4.0)
         lam = np.clip(lam, 1e-7, 1e7)
     return x, cost
