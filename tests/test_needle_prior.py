@@ -4,6 +4,7 @@ mirror twins, and a prior the image contradicts is a refusal naming it, never an
 import numpy as np
 import pytest
 from perception_helpers import pose_errors
+from scipy.spatial.transform import Rotation
 from test_pose_fit import MODEL, _scene_1080p, _tip_disc_hidden, _tip_hidden
 
 from suture_bt.perception.needle_prior import (
@@ -18,6 +19,7 @@ from suture_bt.perception.needle_prior import (
     check_orientation,
     choose_answer,
     plane_crossings,
+    prior_misses,
 )
 from suture_bt.perception.pose_fit import NeedleNotFound, PoseFitter
 from suture_bt.transforms import make_transform
@@ -314,3 +316,30 @@ def test_a_held_place_pins_a_needle_whose_ends_are_both_hidden(seed):
     pos, ang = pose_errors(fit.T_cam_needle, T)
     assert pos < 0.3 and ang < 1.0
     assert placed.slide(_world(st, fit.T_cam_needle), MODEL) < 0.0002
+
+
+def test_batched_misses_equal_the_pose_by_pose_miss():
+    """prior_misses asks each prior for all candidates at once; that equals each pose's own
+    miss, for ports crossed and not crossed, held places, faces and predictions."""
+    model = MODEL
+    rng = np.random.default_rng(7)
+    port, normal = np.array([0.01, 0.05, 0.075]), np.array([0.7, 0.0, 0.7])
+    T = np.tile(np.eye(4), (300, 1, 1))
+    T[:, :3, :3] = Rotation.random(300, random_state=3).as_matrix()
+    # Most arcs pass within a few mm of the port (crossing its plane there), some far.
+    on_arc = model.point_at(rng.uniform(model.tip_angle, model.base_angle, 300))
+    T[:, :3, 3] = port - np.einsum("kij,kj->ki", T[:, :3, :3], on_arc)
+    T[:, :3, 3] += rng.normal(0.0, 0.002, (300, 3)) * (1 + 10 * (rng.uniform(size=(300, 1)) < 0.2))
+    priors = [
+        HeldPrior("psm1", port + 0.001, 0.003),
+        HeldPrior("psm2", port, 0.002, arc_angle=2.0),
+        PortPrior("Entry1", port, 0.003),
+        PortPrior("Entry1", port, 0.003, normal=normal),
+        AcrossJawsPrior("psm1", np.array([0.0, 0.2, 1.0])),
+        PredictedPosePrior(T[3]),
+    ]
+    batched = prior_misses(priors, T, model)
+    one_by_one = np.array([[p.miss(t, model) for p in priors] for t in T])
+    np.testing.assert_allclose(batched, one_by_one, rtol=1e-12, atol=1e-12)
+    crossed = one_by_one[:, 3] <= 1.0
+    assert 50 < crossed.sum() < 300  # both kinds of port case were tested

@@ -130,6 +130,17 @@ class HeldPrior:
             return near
         return max(near, self.slide(T_world_needle, model) / self.arc_tolerance)
 
+    def misses(self, T_world: np.ndarray, model: NeedleModel) -> np.ndarray:
+        """:meth:`miss` of poses (K, 4, 4) at once (K,)."""
+        off = arc_offsets(T_world, np.asarray(self.pinch_point, float)[None], model)[:, 0]
+        near = np.sqrt(np.sum(off * off, axis=1)) / self.tolerance
+        if self.arc_angle is None:
+            return near
+        slide = model.radius * np.abs(
+            place_offsets(T_world, self.pinch_point, self.arc_angle, model)
+        )
+        return np.maximum(near, slide / self.arc_tolerance)
+
     def refusal(self, nearest: float) -> str:
         """The reason when the nearest candidate misses by ``nearest`` tolerances."""
         if self.arc_angle is None:
@@ -222,6 +233,26 @@ class PortPrior:
             return max(near / self.tolerance, 1.0) + 1.0  # never consistent
         return float(np.min(np.linalg.norm(crossings - self.point, axis=1))) / self.tolerance
 
+    def misses(self, T_world: np.ndarray, model: NeedleModel) -> np.ndarray:
+        """:meth:`miss` of poses (K, 4, 4) at once (K,): the crossings of every pose's arc
+        samples found together."""
+        point = np.asarray(self.point, float)
+        off = arc_offsets(T_world, point[None], model)[:, 0]
+        near = np.sqrt(np.sum(off * off, axis=1))
+        if self.normal is None:
+            return near / self.tolerance
+        n = max(int(np.degrees(model.arc_angle)), 2)
+        local = model.point_at(np.linspace(model.base_angle, model.tip_angle, n))
+        world = local[None] @ np.transpose(T_world[:, :3, :3], (0, 2, 1)) + T_world[:, None, :3, 3]
+        h = (world - point) @ np.asarray(self.normal, float)
+        cross = np.sign(h[:, :-1]) * np.sign(h[:, 1:]) < 0
+        with np.errstate(divide="ignore", invalid="ignore"):
+            w = np.where(cross, h[:, :-1] / (h[:, :-1] - h[:, 1:]), 0.0)
+        at = world[:, :-1] + w[..., None] * (world[:, 1:] - world[:, :-1])
+        dist = np.where(cross, np.sqrt(np.sum((at - point) ** 2, axis=-1)), np.inf).min(axis=1)
+        never = np.maximum(near / self.tolerance, 1.0) + 1.0
+        return np.where(cross.any(axis=1), dist / self.tolerance, never)
+
     def refusal(self, nearest: float) -> str:
         """The reason when the nearest candidate misses by ``nearest`` tolerances."""
         how = "through" if self.normal is None else "through (crossing its surface at)"
@@ -286,6 +317,12 @@ class AcrossJawsPrior:
         """The normal's angle from the face's line over the tolerance (≤ 1: consistent)."""
         return self.angle_deg(T_world_needle, signed=False) / self.tolerance_deg
 
+    def misses(self, T_world: np.ndarray, model: NeedleModel) -> np.ndarray:
+        """:meth:`miss` of poses (K, 4, 4) at once (K,)."""
+        face = np.asarray(self.face, float)
+        cos = np.abs(T_world[:, :3, 2] @ face) / float(np.linalg.norm(face))
+        return np.degrees(np.arccos(np.clip(cos, -1.0, 1.0))) / self.tolerance_deg
+
     def facing(self, T_world_needle: np.ndarray, T_world_swapped: np.ndarray) -> bool:
         """Whether ``T_world_needle`` (rather than its base ↔ tip swap) faces as held."""
         return self.angle_deg(T_world_needle) <= self.angle_deg(T_world_swapped)
@@ -311,10 +348,16 @@ def port_planes(priors: Sequence[NeedlePrior]) -> list[tuple[np.ndarray, np.ndar
 def prior_misses(
     priors: Sequence[NeedlePrior], T_world: np.ndarray, model: NeedleModel
 ) -> np.ndarray:
-    """Misses (K, P) of K candidate poses (K, 4, 4) against P priors (≤ 1: consistent)."""
-    return np.array([[p.miss(T, model) for p in priors] for T in T_world]).reshape(
-        len(T_world), len(priors)
-    )
+    """Misses (K, P) of K candidate poses (K, 4, 4) against P priors (≤ 1: consistent): each
+    prior's batched ``misses`` where it has one, else its ``miss`` pose by pose."""
+    T_world = np.reshape(np.asarray(T_world, float), (-1, 4, 4))
+    cols = [
+        p.misses(T_world, model)
+        if hasattr(p, "misses")
+        else np.array([p.miss(T, model) for T in T_world], float)
+        for p in priors
+    ]
+    return np.stack(cols, axis=1) if cols else np.zeros((len(T_world), 0))
 
 
 def consistent(misses: np.ndarray) -> np.ndarray:
