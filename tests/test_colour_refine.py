@@ -7,10 +7,12 @@ from perception_helpers import stereo
 from suture_bt.geometry import NeedleModel
 from suture_bt.perception.colour_refine import (
     ColourRule,
+    channel_sum,
     coarse_components,
     needle_coloured,
     refine_mask,
     remove_thick,
+    violet_score,
 )
 from suture_bt.perception.needle_projection import rasterize_needle
 
@@ -122,3 +124,22 @@ def test_dark_pixels_must_be_neutral_to_pass():
     noisy_black_shaft = (35, 35, 36)
     px = np.array([[port_hole, shaded_wire, warm_highlight, noisy_black_shaft]], np.uint8)
     assert needle_coloured(px, ColourRule())[0].tolist() == [False, True, True, False]
+
+
+def _every_colour() -> np.ndarray:
+    """All 2²⁴ 8-bit RGB colours as rows (N, 3) uint8."""
+    v = np.arange(256, dtype=np.uint8)
+    r, g, b = np.meshgrid(v, v, v, indexing="ij")
+    return np.stack([r.ravel(), g.ravel(), b.ravel()], 1)
+
+
+def test_colour_tests_equal_their_numpy_reductions_on_every_colour():
+    """The channel sums written out give the same bits as numpy's ``mean(-1)`` and
+    ``sum(-1)`` on every 8-bit colour: the colour tests' answers did not change."""
+    rgb = _every_colour()
+    c = rgb.astype(np.float32)
+    level = np.maximum(c.mean(-1), 1.0)
+    reference = (0.5 * (c[..., 0] + c[..., 2]) - c[..., 1]) / level
+    np.testing.assert_array_equal(violet_score(rgb), reference)
+    c16 = rgb.astype(np.int16)
+    np.testing.assert_array_equal(channel_sum(c16), c16.sum(-1))

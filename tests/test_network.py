@@ -7,12 +7,14 @@ import torch
 from suture_bt.perception.network import (
     DEFAULT_WEIGHTS,
     INPUT_SIZE,
+    FrozenByShape,
     NeedleNet,
     WeightsError,
     count_parameters,
     decode_ends,
     decode_keypoints,
     for_inference,
+    frozen_for_inference,
     load_network,
     save_weights,
     to_input,
@@ -114,3 +116,30 @@ def test_inference_copy_gives_the_same_outputs_and_leaves_the_original_alone():
     assert torch.allclose(ref, out, atol=1e-4)
     assert not any(isinstance(m, torch.nn.BatchNorm2d) for m in fast.modules())
     assert any(isinstance(m, torch.nn.BatchNorm2d) for m in net.modules())
+
+
+def test_frozen_graphs_give_the_modules_bits_at_each_shape():
+    """Each input shape gets its own frozen graph, with the inference copy's exact outputs;
+    with autograd on, the module itself runs."""
+    torch.manual_seed(4)
+    net = NeedleNet(width=8).eval()
+    frozen = frozen_for_inference(net)
+    for shape in ((1, 3, 64, 96), (1, 3, 32, 48), (1, 3, 64, 96)):
+        x = torch.rand(shape).contiguous(memory_format=torch.channels_last)
+        with torch.inference_mode():
+            assert torch.equal(frozen(x), frozen.module(x))
+    assert len(frozen._graphs) == 2
+    assert all(g is not frozen.module for g in frozen._graphs.values())
+    x = torch.rand(1, 3, 32, 48, requires_grad=True)
+    assert frozen(x).requires_grad  # the module, with autograd
+
+
+def test_a_module_that_cannot_be_traced_runs_as_itself():
+    class Counts(torch.nn.Module):
+        def forward(self, x):
+            return int(x.shape[0])  # not a tensor: no graph can be traced
+
+    frozen = FrozenByShape(Counts().eval())
+    with torch.no_grad():
+        assert frozen(torch.ones(3, 2)) == 3
+    assert all(g is frozen.module for g in frozen._graphs.values())

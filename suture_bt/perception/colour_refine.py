@@ -38,17 +38,26 @@ class ColourRule:
 BAND_PIXEL_SCORE = 0.45
 
 
+def channel_sum(c: np.ndarray) -> np.ndarray:
+    """R + G + B per pixel of colours (..., 3), added in that order: what ``c.sum(-1)`` gives,
+    without numpy's slow reduction over an axis of three (a third of the colour tests' time).
+    Integer colours give the same integers (int16 holds three 8-bit levels)."""
+    return c[..., 0] + c[..., 1] + c[..., 2]
+
+
 def violet_score(rgb: np.ndarray) -> np.ndarray:
     """Per pixel ((R + B)/2 − G) / level: ≈ 0.9 on the violet swage band, ≈ 0 on grey metal."""
     c = rgb.astype(np.float32)
-    level = np.maximum(c.mean(-1), 1.0)
+    # The channels' float32 mean as numpy's ``mean(-1)`` makes it: the float32 sum over a
+    # float64 count, stored as float32 (the same bits on every 8-bit colour, tested).
+    level = np.maximum((channel_sum(c) / 3).astype(np.float32), 1.0)
     return (0.5 * (c[..., 0] + c[..., 2]) - c[..., 1]) / level
 
 
 def needle_coloured(rgb: np.ndarray, rule: ColourRule) -> np.ndarray:
     """Pixels passing the needle colour test (grey metal: the needle and the instruments)."""
     c = rgb.astype(np.int16)
-    level = c.sum(-1) / 3.0
+    level = channel_sum(c) / 3.0
     bmr = c[..., 2] - c[..., 0]
     dark_ok = (level >= rule.dark_level) | (bmr >= rule.dark_min_blue_minus_red)
     return (bmr >= rule.min_blue_minus_red) & (level >= rule.min_level) & dark_ok

@@ -63,7 +63,7 @@ from suture_bt.perception.network import (
     OUTPUT_STRIDE,
     NeedleNet,
     decode_ends,
-    for_inference,
+    frozen_for_inference,
     load_network,
 )
 from suture_bt.perception.pose_fit import (
@@ -148,7 +148,7 @@ class NeedleLocalizer:
         ``max_exposed`` (m of arc): see :data:`MAX_EXPOSED` (inf: no check)."""
         self.stereo = stereo
         self.model = model or NeedleModel()
-        self.net = for_inference(net if net is not None else load_network(weights))
+        self.net = frozen_for_inference(net if net is not None else load_network(weights))
         if threads is not None:
             torch.set_num_threads(threads)
         self.rule = rule or ColourRule()

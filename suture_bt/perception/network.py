@@ -12,6 +12,7 @@ Weights load with ``torch.load(weights_only=True)``; a missing or mismatched fil
 from __future__ import annotations
 
 import copy
+import warnings
 from pathlib import Path
 
 import numpy as np
@@ -117,6 +118,47 @@ def for_inference(net: NeedleNet) -> NeedleNet:
                     mod._modules[a] = fuse_conv_bn_eval(conv, bn)
                     mod._modules[b] = nn.Identity()
     return net.to(memory_format=torch.channels_last)
+
+
+class FrozenByShape:
+    """The inference network as a TorchScript graph frozen for each input shape, traced on
+    the shape's first call without autograd (about 0.17 s, once): constants folded and the
+    Python of every module call gone, 10.8 → 8.0 ms an eye at 480×272 on this 2-core CPU, the
+    same bits (checked on the first call of each shape; a graph that differs, or fails to
+    build, leaves that shape to the module). With autograd on, the module itself runs. Only
+    for modules whose control flow depends on nothing but the input's shape, type and memory
+    layout (the key of a graph), as :class:`NeedleNet`'s does."""
+
+    def __init__(self, module: nn.Module) -> None:
+        self.module = module
+        self._graphs: dict = {}
+
+    def __call__(self, x: torch.Tensor) -> torch.Tensor:
+        if torch.is_grad_enabled():
+            return self.module(x)
+        cl = x.is_contiguous(memory_format=torch.channels_last)
+        key = (tuple(x.shape), x.dtype, cl)
+        if key not in self._graphs:
+            self._graphs[key] = self._frozen(x)
+        return self._graphs[key](x)
+
+    def _frozen(self, x: torch.Tensor):
+        """A frozen graph for x's shape, or the module where the graph is not the same."""
+        sample = x.detach().clone()
+        try:
+            with warnings.catch_warnings(), torch.inference_mode(False), torch.no_grad():
+                warnings.simplefilter("ignore")  # the traced join's shape test is constant
+                sample = sample.clone()
+                graph = torch.jit.freeze(torch.jit.trace(self.module, sample, check_trace=False))
+                same = torch.equal(graph(sample), self.module(sample))
+        except Exception:  # noqa: BLE001 - any failure to build: the module is the answer
+            return self.module
+        return graph if same else self.module
+
+
+def frozen_for_inference(net: NeedleNet) -> FrozenByShape:
+    """:func:`for_inference`'s copy run as :class:`FrozenByShape` graphs."""
+    return FrozenByShape(for_inference(net))
 
 
 def count_parameters(net: nn.Module) -> int:

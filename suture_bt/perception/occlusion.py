@@ -21,6 +21,7 @@ import numpy as np
 from suture_bt.perception.colour_refine import (
     BAND_PIXEL_SCORE,
     ColourRule,
+    channel_sum,
     needle_coloured,
     violet_score,
 )
@@ -63,7 +64,7 @@ def end_is_occluded(
     if np.any(grey & ~mask & near):
         return True
     c16 = rgb[c:d, a:b].astype(np.int16)
-    level = c16.sum(-1) / 3.0
+    level = channel_sum(c16) / 3.0
     tissue = (c16[..., 0] - c16[..., 2] >= TISSUE_RED_MINUS_BLUE) & (level >= rule.min_level)
     cavity = level < rule.min_level
     n = max(int(near.sum()), 1)
@@ -132,7 +133,7 @@ def silhouette_cut(
     ring = cv2.dilate(mask.astype(np.uint8), np.ones((3, 3), np.uint8)).astype(bool) & ~mask
     ys, xs = np.nonzero(ring)
     c16 = crop[ys, xs].astype(np.int16)
-    dark = c16.sum(-1) / 3.0 < rule.min_level
+    dark = channel_sum(c16) / 3.0 < rule.min_level
     lit = (c16[:, 0] - c16[:, 2] >= TISSUE_RED_MINUS_BLUE) & ~dark
     if not dark.any() or not lit.any():
         return out

@@ -32,7 +32,7 @@ from suture_bt.geometry import NeedleModel
 from suture_bt.geometry.phantom import TISSUE_TOP_Z, TISSUE_X, TISSUE_Y
 from suture_bt.geometry.tissue_surface import solid_pieces
 from suture_bt.interfaces import StereoCameraModel
-from suture_bt.perception.colour_refine import ColourRule, needle_coloured
+from suture_bt.perception.colour_refine import ColourRule, channel_sum, needle_coloured
 from suture_bt.perception.mask_view import MaskView
 from suture_bt.perception.occlusion import TISSUE_RED_MINUS_BLUE
 
@@ -157,7 +157,7 @@ def arc_exposure(
             sub[in_tissue[inside]] = HIDDEN
             if tissue_hides:
                 c16 = img[c:d, a:b][iv, iu].astype(np.int16)
-                level = c16.sum(-1) / 3.0
+                level = channel_sum(c16) / 3.0
                 pink = (c16[:, 0] - c16[:, 2] >= TISSUE_RED_MINUS_BLUE) & (level >= rule.min_level)
                 sub[pink] = HIDDEN
             sub[d_mask[iv, iu] <= reach_seen] = SEEN
