@@ -125,10 +125,7 @@ class HeldPrior:
     def miss(self, T_world_needle: np.ndarray, model: NeedleModel) -> float:
         """Distance from the pinch point to the arc over the tolerance, or the slide from the
         held place over its own, whichever is worse (≤ 1: consistent)."""
-        near = arc_distance(self.pinch_point, T_world_needle, model) / self.tolerance
-        if self.arc_angle is None:
-            return near
-        return max(near, self.slide(T_world_needle, model) / self.arc_tolerance)
+        return float(self.misses(np.asarray(T_world_needle, float)[None], model)[0])
 
     def misses(self, T_world: np.ndarray, model: NeedleModel) -> np.ndarray:
         """:meth:`miss` of poses (K, 4, 4) at once (K,)."""
@@ -224,14 +221,9 @@ class PortPrior:
 
     def miss(self, T_world_needle: np.ndarray, model: NeedleModel) -> float:
         """Distance from the port to the arc (with a normal: to the nearest place where the
-        arc crosses the port's plane) over the tolerance (≤ 1: consistent)."""
-        near = arc_distance(self.point, T_world_needle, model)
-        if self.normal is None:
-            return near / self.tolerance
-        crossings = plane_crossings(T_world_needle, model, self.point, self.normal)
-        if not len(crossings):
-            return max(near / self.tolerance, 1.0) + 1.0  # never consistent
-        return float(np.min(np.linalg.norm(crossings - self.point, axis=1))) / self.tolerance
+        arc crosses the port's plane, as :func:`plane_crossings` finds them) over the
+        tolerance (≤ 1: consistent; an arc that does not cross is never consistent)."""
+        return float(self.misses(np.asarray(T_world_needle, float)[None], model)[0])
 
     def misses(self, T_world: np.ndarray, model: NeedleModel) -> np.ndarray:
         """:meth:`miss` of poses (K, 4, 4) at once (K,): the crossings of every pose's arc
@@ -315,7 +307,7 @@ class AcrossJawsPrior:
 
     def miss(self, T_world_needle: np.ndarray, model: NeedleModel) -> float:
         """The normal's angle from the face's line over the tolerance (≤ 1: consistent)."""
-        return self.angle_deg(T_world_needle, signed=False) / self.tolerance_deg
+        return float(self.misses(np.asarray(T_world_needle, float)[None], model)[0])
 
     def misses(self, T_world: np.ndarray, model: NeedleModel) -> np.ndarray:
         """:meth:`miss` of poses (K, 4, 4) at once (K,)."""
