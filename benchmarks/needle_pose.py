@@ -48,9 +48,10 @@ from tqdm import tqdm
 from suture_bt.datagen.needle_data import SimScene
 from suture_bt.geometry.needle import SCORED_POINTS
 from suture_bt.kinematics import forward_kinematics
+from suture_bt.perception.arc_geometry import arc_distance
 from suture_bt.perception.in_hand import JAW_POINT_IN_TIP
 from suture_bt.perception.needle_localizer import MAX_ANGLE_STD_DEG, NeedleLocalizer
-from suture_bt.perception.needle_prior import HeldPrior, PortPrior, arc_distance
+from suture_bt.perception.needle_prior import HeldPrior, PortPrior
 from suture_bt.perception.needle_projection import rasterize_needle
 from suture_bt.perception.pose_fit import NeedleNotFound
 from suture_bt.perception.unseen_arc import phantom_tissue

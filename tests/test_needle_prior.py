@@ -7,6 +7,7 @@ from perception_helpers import pose_errors
 from scipy.spatial.transform import Rotation
 from test_pose_fit import MODEL, _scene_1080p, _tip_disc_hidden, _tip_hidden
 
+from suture_bt.perception.arc_geometry import arc_distance, plane_crossings
 from suture_bt.perception.needle_prior import (
     MAX_PRIOR_COST_RATIO,
     AcrossJawsPrior,
@@ -14,11 +15,9 @@ from suture_bt.perception.needle_prior import (
     PortPrior,
     PredictedPosePrior,
     PriorContradicted,
-    arc_distance,
     check_held_place,
     check_orientation,
     choose_answer,
-    plane_crossings,
     prior_misses,
 )
 from suture_bt.perception.pose_fit import NeedleNotFound, PoseFitter

@@ -18,13 +18,8 @@ from collections.abc import Sequence
 import numpy as np
 
 from suture_bt.geometry import NeedleModel
-from suture_bt.perception.needle_prior import (
-    HeldPrior,
-    NeedlePrior,
-    PortPrior,
-    arc_offsets,
-    place_offsets,
-)
+from suture_bt.perception.arc_geometry import arc_offsets, place_offsets
+from suture_bt.perception.needle_prior import HeldPrior, NeedlePrior, PortPrior
 
 #: Pixels a miss of one tolerance counts as in the polish (about the spread of the edge
 #: residuals there), so a prior weighs like an edge point as well placed as its tolerance says.
@@ -65,7 +60,7 @@ class PriorTerm:
         return len(self.points) > 0
 
     def misses(self, T: np.ndarray) -> np.ndarray:
-        """Offsets (K, P, 3) over each prior's tolerance (:func:`needle_prior.arc_offsets`)."""
+        """Offsets (K, P, 3) over each prior's tolerance (:func:`.arc_geometry.arc_offsets`)."""
         return arc_offsets(T, self.points, self.model) / self.tolerance[None, :, None]
 
     def slides(self, T: np.ndarray) -> np.ndarray:
