@@ -212,9 +212,12 @@ def test_a_clean_mask_leaves_no_close_rival():
 
 def test_pruning_to_one_second_stage_start_still_recovers_the_pose():
     """The cheap first stage ranks the starts well enough that keeping its best one works on
-    a clean mask (the default keeps several for occluded needles)."""
+    a clean mask (the default keeps several for occluded needles). No probes: the near probe
+    may return the answer itself a rounding error cheaper (1e-10 mm away, 1e-13 of the cost),
+    whether it does depends on how numba's cache linked the compiled kernel."""
     st, T, left, right, ends = _scene_1080p(8, 2.0)
-    res = PoseFitter(st, MODEL, n_second_stage=1, probe_rivals=False).fit(left, right, tuple(ends))
+    fitter = PoseFitter(st, MODEL, n_second_stage=1, probe_rivals=False, probe_near=False)
+    res = fitter.fit(left, right, tuple(ends))
     assert len(res.candidates) == 1 and res.ambiguity == float("inf")
     pos, ang = pose_errors(res.T_cam_needle, T)
     assert pos < 0.5 and ang < 1.5
