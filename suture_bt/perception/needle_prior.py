@@ -172,6 +172,10 @@ class PredictedPosePrior:
         dp, da = self.errors(T_world_needle, model)
         return max(dp / self.position_tolerance, da / self.angle_tolerance_deg)
 
+    def misses(self, T_world: np.ndarray, model: NeedleModel) -> np.ndarray:
+        """:meth:`miss` of poses (K, 4, 4), one by one (a prediction is asked of few)."""
+        return np.array([self.miss(T, model) for T in T_world], float)
+
     def refusal(self, nearest: float) -> str:
         """The reason when the nearest candidate misses by ``nearest`` tolerances."""
         return (
@@ -235,15 +239,10 @@ def port_planes(priors: Sequence[NeedlePrior]) -> list[tuple[np.ndarray, np.ndar
 def prior_misses(
     priors: Sequence[NeedlePrior], T_world: np.ndarray, model: NeedleModel
 ) -> np.ndarray:
-    """Misses (K, P) of K candidate poses (K, 4, 4) against P priors (≤ 1: consistent): each
-    prior's batched ``misses`` where it has one, else its ``miss`` pose by pose."""
+    """Misses (K, P) of K candidate poses (K, 4, 4) against P priors (≤ 1: consistent), each
+    prior asked for all candidates at once."""
     T_world = np.reshape(np.asarray(T_world, float), (-1, 4, 4))
-    cols = [
-        p.misses(T_world, model)
-        if hasattr(p, "misses")
-        else np.array([p.miss(T, model) for T in T_world], float)
-        for p in priors
-    ]
+    cols = [p.misses(T_world, model) for p in priors]
     return np.stack(cols, axis=1) if cols else np.zeros((len(T_world), 0))
 
 

@@ -144,11 +144,10 @@ class FrozenByShape:
 
     def _frozen(self, x: torch.Tensor):
         """A frozen graph for x's shape, or the module where the graph is not the same."""
-        sample = x.detach().clone()
         try:
             with warnings.catch_warnings(), torch.inference_mode(False), torch.no_grad():
                 warnings.simplefilter("ignore")  # the traced join's shape test is constant
-                sample = sample.clone()
+                sample = x.detach().clone()  # a normal tensor, even from inference mode
                 graph = torch.jit.freeze(torch.jit.trace(self.module, sample, check_trace=False))
                 same = torch.equal(graph(sample), self.module(sample))
         except Exception:  # noqa: BLE001 - any failure to build: the module is the answer
