@@ -1,10 +1,12 @@
 """The fit stage: end hypotheses compared without order, the answer's gates refuse with their
-reasons, and a clean outline is answered."""
+reasons, a clean outline is answered, and an answer whose ends moved far from every
+hypothesis is refit from them."""
 
 import numpy as np
 import pytest
-from perception_helpers import pose_errors
-from test_pose_fit import MODEL, _scene_1080p, _tip_hidden
+from perception_helpers import pose_errors, stereo
+from scipy.spatial.transform import Rotation
+from test_pose_fit import MODEL, _scene_1080p, _tip_hidden, _views
 
 from suture_bt.perception.colour_refine import ColourRule
 from suture_bt.perception.fit_attempts import (
@@ -13,6 +15,8 @@ from suture_bt.perception.fit_attempts import (
     FitAttempts,
     _same_pair,
 )
+from suture_bt.perception.needle_prior import HeldPrior
+from suture_bt.perception.needle_projection import project_cam, transform_points
 from suture_bt.perception.pose_fit import NeedleNotFound, PoseFitter
 
 
@@ -55,11 +59,81 @@ def test_an_answer_with_a_close_rival_is_refused_with_its_reason():
     occ, short, _ = _tip_hidden(st, T, left, right, ends)
     images = tuple(np.zeros((1080, 1920, 3), np.uint8) for _ in range(2))
     args = (images, tuple(occ), short, None, 2.0, None, np.stack([short, short]), np.zeros((2, 2)))
-    loose = dict(max_angle_std_deg=float("inf"))
+    loose = dict(max_angle_std_deg=float("inf"), refit_moved_px=float("inf"))
     with pytest.raises(NeedleNotFound, match="another pose .* explains the outline almost as well"):
         _attempts(st, **loose)(*args)
+    # Nothing says the tip is hidden (black images, no grey occluder): the answer's ends moved
+    # from the keypoints, and a refit from them finds a cheaper pose 55 deg off with no close
+    # rival of its own. The first answer, 1.15x its cost, is its rival: still refused.
+    with pytest.raises(NeedleNotFound, match="another pose .* explains the outline almost as well"):
+        _attempts(st, max_angle_std_deg=float("inf"))(*args)
     # The rival ties the answer: without the rival gate the tie gate refuses it.
     with pytest.raises(NeedleNotFound, match="explain the outline equally well"):
         _attempts(st, max_rival_ratio=0.0, **loose)(*args)
     fit = _attempts(st, max_rival_ratio=0.0, max_tie_ratio=0.0, **loose)(*args)
     assert fit.rival_ratio <= MAX_RIVAL_RATIO and fit.tie_ratio <= MAX_TIE_RATIO
+
+
+def _bulge_keypoint_args():
+    """Session 25's wrong ``unoccluded`` answer, with exact masks: a needle 174 mm away whose
+    ends project 18 px apart while its bulge spans 43 px; the base keypoint on the bulge's
+    far extreme (22 px from the base) and a stereo depth of 136 mm."""
+    st = stereo(1920, 1080)
+    T = np.array(
+        [
+            [0.63714377, -0.28837484, -0.71476413, -0.07283296],
+            [0.70443897, -0.15842606, 0.69185759, -0.08034338],
+            [-0.31275159, -0.94432046, 0.10220229, 0.17395174],
+            [0.0, 0.0, 0.0, 1.0],
+        ]
+    )
+    T[:3, :3] = Rotation.from_matrix(T[:3, :3]).as_matrix()  # orthonormal to the bit
+    left, right = _views(st, T)
+    base, tip = project_cam(st.left, transform_points(T, np.stack([MODEL.base, MODEL.tip])))
+    th = np.linspace(MODEL.tip_angle, MODEL.base_angle, 400)
+    arc = np.stack([MODEL.radius * np.cos(th), MODEL.radius * np.sin(th), 0 * th], 1)
+    uv = project_cam(st.left, transform_points(T, arc))
+    bulge = uv[np.argmax(np.linalg.norm(uv - tip, axis=1))]
+    images = tuple(np.zeros((1080, 1920, 3), np.uint8) for _ in range(2))
+    kp = np.stack([np.stack([bulge, tip])] * 2)
+    args = (images, (left, right), (bulge, tip), 0.136, 2.0, None, kp, np.full((2, 2), 0.9))
+    return st, T, base, args
+
+
+def test_an_answer_whose_ends_moved_far_from_every_hypothesis_is_searched_again_from_them():
+    """The fit's ends land 22 px from the keypoint it started from: it is refit from its own
+    ends over every depth, and the cheaper answer (its ends where it found them) stands."""
+    st, T, base, args = _bulge_keypoint_args()
+    once = _attempts(st, refit_moved_px=float("inf"))(*args)
+    assert once.ends_moved_px > 8.0
+    fit = _attempts(st)(*args)
+    assert fit.ends_moved_px < 1.0 and fit.cost <= once.cost
+    pos, ang = pose_errors(fit.T_cam_needle, T)
+    _, ang_swapped = pose_errors(fit.T_cam_needle, MODEL.swapped(T))
+    assert pos < 1.0 and min(ang, ang_swapped) < 1.0
+
+
+def test_no_refit_where_an_end_may_be_hidden(monkeypatch):
+    """A weak keypoint says an end may be hidden: the fit's second search already starts
+    from its own ends, so no refit follows however far they moved (nor with priors, which
+    start that search too)."""
+    st, T, base, args = _bulge_keypoint_args()
+    calls = []
+    fitter = PoseFitter(st, MODEL)
+    real = fitter.fit
+    monkeypatch.setattr(
+        fitter, "fit", lambda *a, **k: calls.append(k["hidden_end"]) or real(*a, **k)
+    )
+    attempts = FitAttempts(st, MODEL, ColourRule(), fitter)
+    weak = np.array([[0.9, 0.1], [0.9, 0.1]])
+    attempts(*args[:-1], weak)
+    assert calls and all(calls)
+    calls.clear()
+    mid = (MODEL.base_angle + MODEL.tip_angle) / 2
+    on_arc = T[:3, :3] @ (MODEL.radius * np.array([np.cos(mid), np.sin(mid), 0.0])) + T[:3, 3]
+    pinch = (st.left.T_world_cam @ np.append(on_arc, 1.0))[:3]
+    attempts(*args, priors=[HeldPrior("psm2", pinch, 0.001)])
+    assert calls == [False]  # the fitter's own second search runs with priors
+    calls.clear()
+    attempts(*args)
+    assert calls == [False, False]  # the fit, then its refit from its own ends

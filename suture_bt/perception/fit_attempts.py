@@ -11,7 +11,7 @@ among its candidates (:mod:`pose_fit`).
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 import numpy as np
 
@@ -23,10 +23,16 @@ from suture_bt.perception.edge_samples import mask_ends
 from suture_bt.perception.geodesic_ends import geodesic_ends
 from suture_bt.perception.needle_ends import band_pixels
 from suture_bt.perception.needle_prior import PriorContradicted
+from suture_bt.perception.needle_projection import end_pixels
 from suture_bt.perception.occlusion import anchored_ends, end_is_occluded, extended_ends
 from suture_bt.perception.pose_fit import NeedleNotFound, PoseFitResult, PoseFitter
 from suture_bt.perception.prior_seeds import seed_poses
-from suture_bt.perception.rival_probe import MAX_RIVAL_RATIO, MAX_TIE_RATIO
+from suture_bt.perception.rival_probe import (
+    MAX_RIVAL_RATIO,
+    MAX_TIE_RATIO,
+    distinct,
+    pose_offset,
+)
 
 #: A keypoint this confident anchors its end even when the other end's keypoint is weak
 #: (then the other end is sought at, and behind, the visible piece's far end).
@@ -49,6 +55,15 @@ MIN_INLIER_FRACTION = 0.7
 #: (seeds 1000 and 6173, 511 right answers) it refuses 4 right ones, 100-182 mm away, two of
 #: them 1.1-1.3 mm off; no wrong answer there exceeded 0.6.
 MAX_POSITION_STD_MM = 0.6
+#: An answer whose end pixels lie farther than this (px) from every end hypothesis the search
+#: started from, though no end was thought hidden and no prior given (those fits search again
+#: from their own ends anyway), is searched again from its own ends over every depth: its
+#: hypotheses were wrong (a keypoint and the mask's far pair both on the arc's bulge, say),
+#: and so may be the basin they led to. Session 25's one wrong answer in 800 (report seed
+#: 27322476, ``unoccluded`` #0: 7.7 mm / 171° off, its ends 20.7 px from the keypoints) is
+#: then answered 0.58 mm / 0.20° off; on the development frames (seeds 6173 and 1000, 800
+#: calls over every set) it never ran, and every answer is the same.
+REFIT_MOVED_PX = 8.0
 
 
 def _same_pair(a, b, tol_px: float = 3.0) -> bool:
@@ -79,6 +94,7 @@ class FitAttempts:
     max_rival_ratio: float = MAX_RIVAL_RATIO
     max_position_std_mm: float = MAX_POSITION_STD_MM
     max_tie_ratio: float = MAX_TIE_RATIO
+    refit_moved_px: float = REFIT_MOVED_PX
 
     def __call__(
         self, images, views, ends, depth, half_width, previous, kp, score, priors=()
@@ -156,6 +172,8 @@ class FitAttempts:
                 contradicted = exc
             except NeedleNotFound:
                 pass
+        if fit is not None and not (hidden or priors) and fit.ends_moved_px > self.refit_moved_px:
+            fit = self._refit_from_own_ends(fit, attempt)
         if fit is None and contradicted is not None:
             raise contradicted
         if fit is None:
@@ -200,3 +218,22 @@ class FitAttempts:
                 "part is the same arc in both and nothing seen tells them apart"
             )
         return fit
+
+    def _refit_from_own_ends(self, fit: PoseFitResult, attempt) -> PoseFitResult:
+        """The cheaper of ``fit`` and a fit from its own end pixels over every depth; a refit
+        answer keeps ``fit`` as its rival when clearly different (from it and its base ↔ tip
+        swap), so a view the first fit found ambiguous stays so (the rival gate)."""
+        own = tuple(end_pixels(self.stereo.left, fit.T_cam_needle, self.model))
+        try:
+            again = attempt(own, [])
+        except NeedleNotFound:
+            return fit
+        if not again.cost < fit.cost:
+            return fit
+        T, T_first = again.T_cam_needle, fit.T_cam_needle
+        if not (distinct(T, T_first) and distinct(self.model.swapped(T), T_first)):
+            return again
+        ratio = fit.cost / again.cost if again.cost > 0 else float("inf")
+        if not ratio < again.rival_ratio:
+            return again
+        return replace(again, rival_ratio=ratio, rival_offset=pose_offset(T_first, T))

@@ -40,3 +40,7 @@ class PoseFitResult:
     #: the answer and its base ↔ tip swap and usable under the priors, over the answer's (inf:
     #: none): near 1, a tie the image cannot break (:data:`~.rival_probe.MAX_TIE_RATIO`).
     tie_ratio: float = float("inf")
+    #: How far (px) the answer's end pixels in the left image lie from the nearest end
+    #: hypothesis the search started from (:func:`~.pose_fit.ends_moved`): far, and the
+    #: hypotheses were wrong, so the search may have started in the wrong basin.
+    ends_moved_px: float = float("inf")

@@ -39,6 +39,7 @@ from suture_bt.perception.fit_attempts import (  # noqa: F401 - gates, re-export
     MAX_RMS_PX,
     MAX_TIE_RATIO,
     MIN_INLIER_FRACTION,
+    REFIT_MOVED_PX,
     STRONG_KEYPOINT_SCORE,
     FitAttempts,
 )
@@ -162,6 +163,8 @@ class NeedleLocalizer:
         self.max_tie_ratio = MAX_TIE_RATIO
         #: An answer whose predicted arc-centre spread exceeds this (mm) is refused.
         self.max_position_std_mm = MAX_POSITION_STD_MM
+        #: An answer whose ends moved farther (px) from every end hypothesis is refit from them.
+        self.refit_moved_px = REFIT_MOVED_PX
         self.tissue = tissue
         self.max_exposed = max_exposed
         self.fitter = PoseFitter(
@@ -390,6 +393,7 @@ class NeedleLocalizer:
             self.max_rival_ratio,
             self.max_position_std_mm,
             self.max_tie_ratio,
+            self.refit_moved_px,
         )
         return attempts(images, views, ends, depth, half_width, previous, kp, score, priors)
 

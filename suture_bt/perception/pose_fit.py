@@ -86,6 +86,17 @@ from suture_bt.perception.tissue_cut import TissueCut
 RESEED_RIVAL_RATIO = 1.1
 
 
+def ends_moved(ends: np.ndarray, tried: Sequence) -> float:
+    """How far (px) the end pixels ``ends`` (2, 2) lie from the nearest of the end hypotheses
+    ``tried`` (the farther end of the pair, either way round; inf: none tried)."""
+    if not len(tried):
+        return float("inf")
+    h = np.asarray(tried, float)  # (H, 2 ends, 2)
+    same = np.linalg.norm(h - ends[None], axis=2).max(1)
+    swapped = np.linalg.norm(h - ends[None, ::-1], axis=2).max(1)
+    return float(np.minimum(same, swapped).min())
+
+
 @dataclass
 class PoseFitter:
     """Multi-start stereo fit of the needle pose to two masks (see module docstring)."""
@@ -213,11 +224,14 @@ class PoseFitter:
             [np.ones(len(coarse))] + [t.column_weights(len(coarse)) for t in terms]
         )
 
+        tried = []  # the end-pixel hypotheses searched
+
         def best_starts(ends, hint, n: int) -> np.ndarray:
             """The n lowest-cost feasible starts (coarse edge subset) for one end hypothesis."""
             if ends is None:
                 ends = farthest_pair(el, rng)
             ub, ut = (np.asarray(e, float) for e in ends)
+            tried.append((ub, ut))
             return lowest(self._starts(ub, ut, hint), n)
 
         def lowest(st: np.ndarray, n: int) -> np.ndarray:
@@ -340,6 +354,7 @@ class PoseFitter:
             rival_ratio=rival_ratio,
             rival_offset=rival_offset,
             tie_ratio=tie,
+            ends_moved_px=ends_moved(np.asarray(end_pixels(cam, T, self.model)), tried),
         )
 
     def _probed(self, xf, cf, chosen, rays: FitRays, polish: list, priors, hidden_end: bool):
