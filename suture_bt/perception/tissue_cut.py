@@ -21,7 +21,7 @@ import math
 from dataclasses import dataclass
 
 import numpy as np
-from numba import njit
+from numba import njit, prange
 
 from suture_bt.geometry import NeedleModel
 
@@ -168,7 +168,7 @@ def _boundary(A, B, C, G, act, D, u, v):
     return arg
 
 
-@njit(cache=True)
+@njit(cache=True, parallel=True)
 def hidden_spans(T, P, N, G, D, rad, lo, hi, shift, grid):
     """Spans (K, 2, 2) of arc angle inside the tissue (planes: points P, normals N; Q each;
     pieces: plane offsets G, depths D) for poses T (K, 4, 4): found on ``grid`` (angles
@@ -177,10 +177,10 @@ def hidden_spans(T, P, N, G, D, rad, lo, hi, shift, grid):
     with a plane the pose's whole circle lies outside of is skipped (most poses: all)."""
     K, Q, S, NG = T.shape[0], P.shape[0], grid.shape[0], G.shape[0] - 1
     out = np.full((K, 2, 2), np.nan)
-    A, B, C = np.empty(Q), np.empty(Q), np.empty(Q)
-    act = np.empty(NG, np.bool_)
     gc, gs = np.cos(grid), np.sin(grid)
-    for k in range(K):
+    for k in prange(K):  # poses are independent: the same bits on any number of threads
+        A, B, C = np.empty(Q), np.empty(Q), np.empty(Q)
+        act = np.empty(NG, np.bool_)
         for q in range(Q):
             a = b = c = 0.0
             for m in range(3):
