@@ -25,8 +25,9 @@ The localiser is given the task's known phantom as its tissue model (``unseen_ar
 the block's top and footprint, the ridge under the port pairs), so the tissue hides the needle
 only where it can (``--max-exposed-mm inf`` turns the unseen-part check off; the minimum of
 arc seen in each eye, ``exposure_gate.MIN_SEEN``, stays). Each answer's row records the arc
-each eye sees (``seen_mm``) and how close the fit came to a tie (``tie_ratio``,
-``PoseFitResult.tie_ratio``; session 19's report files call an earlier form ``twin_ratio``).
+each eye sees (``seen_mm``), how close the fit came to a tie (``tie_ratio``,
+``PoseFitResult.tie_ratio``; session 19's report files call an earlier form ``twin_ratio``)
+and how far its ends moved from the end hypotheses it started from (``ends_moved_px``).
 
     python benchmarks/needle_pose.py [--json PATH] [--n 200] [--resolution 1920x1080]
         [--prior none|held|port|task|both] [--set SET ...]
@@ -301,6 +302,7 @@ def _localize_row(loc, left, right, T_true, priors) -> dict:
         "total_exposed_mm": [1e3 * x for x in est.exposure.total_exposed],
         "seen_mm": [1e3 * x for x in est.exposure.seen],
         "tie_ratio": est.fit.tie_ratio if np.isfinite(est.fit.tie_ratio) else None,
+        "ends_moved_px": est.fit.ends_moved_px if np.isfinite(est.fit.ends_moved_px) else None,
     }
 
 
