@@ -1,6 +1,6 @@
 """The localiser's fit stage: the end hypotheses the images offer, the fit from them, a
-refit when the first fails, and the gates on the answer (RMS, inliers, predicted spread, a
-rival pose of near-equal cost).
+refit when the first fails or its ends moved far from every hypothesis (REFIT_MOVED_PX), and
+the gates on the answer (RMS, inliers, predicted spread, a rival pose of near-equal cost).
 
 Hypotheses: the keypoints (with their stereo depth), ends that touch an occluder pushed on
 behind it (:mod:`occlusion`), a confident keypoint with the visible piece's far end, the
