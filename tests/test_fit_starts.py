@@ -2,11 +2,18 @@
 and spans depths × turns, and distinct basins go before copies of the best."""
 
 import numpy as np
+import pytest
 from perception_helpers import random_needle_pose, stereo
 from scipy.spatial.transform import Rotation
 from test_pose_fit import MODEL
 
-from suture_bt.perception.fit_starts import DISTINCT, diverse, rot_angle, start_params
+from suture_bt.perception.fit_starts import (
+    DISTINCT,
+    diverse,
+    ends_moved,
+    rot_angle,
+    start_params,
+)
 from suture_bt.perception.needle_projection import params_to_pose, pose_to_params
 
 
@@ -41,3 +48,14 @@ def test_second_stage_starts_are_distinct_basins_before_copies():
     assert list(diverse(x, cost, 3, st.left, MODEL)) == [0, 3, 1]
     assert list(diverse(x, np.full(4, np.inf), 2, st.left, MODEL)) == [0, 1]
     assert np.isclose(rot_angle(T[:3, :3], other[:3, :3]), np.deg2rad(40.0)) and DISTINCT < 0.7
+
+
+def test_ends_moved_is_the_farther_end_from_the_nearest_hypothesis_either_way_round():
+    ends = np.array([[100.0, 100.0], [130.0, 100.0]])
+    tried = [
+        (np.array([100.0, 103.0]), np.array([130.0, 104.0])),  # 4 px (its farther end)
+        (np.array([131.0, 100.0]), np.array([100.0, 102.0])),  # swapped: 2 px
+    ]
+    assert ends_moved(ends, tried) == pytest.approx(2.0)
+    assert ends_moved(ends, tried[:1]) == pytest.approx(4.0)
+    assert ends_moved(ends, []) == float("inf")

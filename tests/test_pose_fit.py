@@ -417,14 +417,3 @@ def test_a_close_rival_also_seeds_the_second_search(monkeypatch, ratio, n_seeds)
     # One call for the main hypothesis, one per alternative, then the reseeds.
     assert len(calls) == 2 + n_seeds
     assert all(h is not None for h in calls[2:])
-
-
-def test_ends_moved_is_the_farther_end_from_the_nearest_hypothesis_either_way_round():
-    ends = np.array([[100.0, 100.0], [130.0, 100.0]])
-    tried = [
-        (np.array([100.0, 103.0]), np.array([130.0, 104.0])),  # 4 px (its farther end)
-        (np.array([131.0, 100.0]), np.array([100.0, 102.0])),  # swapped: 2 px
-    ]
-    assert pose_fit.ends_moved(ends, tried) == pytest.approx(2.0)
-    assert pose_fit.ends_moved(ends, tried[:1]) == pytest.approx(4.0)
-    assert pose_fit.ends_moved(ends, []) == float("inf")

@@ -42,6 +42,6 @@ class PoseFitResult:
     tie_ratio: float = float("inf")
     #: How far (px) the answer's end pixels in the left image lie from the nearest end
     #: hypothesis the search started from, its second search's included
-    #: (:func:`~.pose_fit.ends_moved`): far, and the hypotheses were wrong, so the search may
+    #: (:func:`~.fit_starts.ends_moved`): far, and the hypotheses were wrong, so the search may
     #: have started in the wrong basin (:data:`~.fit_attempts.REFIT_MOVED_PX`).
     ends_moved_px: float = float("inf")

@@ -1,8 +1,11 @@
 """Where the pose fit starts and which of its poses it carries on: a grid of starts over
-depths, chord roots and the arc's turn about its chord, and a pick of clearly different
-low-cost poses so copies of one basin do not crowd out the next (often the right one)."""
+depths, chord roots and the arc's turn about its chord, a pick of clearly different
+low-cost poses so copies of one basin do not crowd out the next (often the right one), and
+how far a fitted pose's ends moved from the end hypotheses it started from."""
 
 from __future__ import annotations
+
+from collections.abc import Sequence
 
 import numpy as np
 
@@ -71,3 +74,14 @@ def diverse(x: np.ndarray, cost: np.ndarray, n: int, cam, model: NeedleModel) ->
     rest = [j for j in range(len(order)) if j not in picked]
     picked += rest[: n - len(picked)]
     return np.array([order[j] for j in picked], int)
+
+
+def ends_moved(ends: np.ndarray, tried: Sequence) -> float:
+    """How far (px) the end pixels ``ends`` (2, 2) lie from the nearest of the end hypotheses
+    ``tried`` (the farther end of the pair, either way round; inf: none tried)."""
+    if not len(tried):
+        return float("inf")
+    h = np.asarray(tried, float)  # (H, 2 ends, 2)
+    same = np.linalg.norm(h - ends[None], axis=2).max(1)
+    swapped = np.linalg.norm(h - ends[None, ::-1], axis=2).max(1)
+    return float(np.minimum(same, swapped).min())

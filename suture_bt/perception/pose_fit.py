@@ -50,7 +50,13 @@ from suture_bt.perception.fit_solver import (  # noqa: F401 - re-exported
     pose_uncertainty,
     robust_cost,
 )
-from suture_bt.perception.fit_starts import DISTINCT, diverse, rot_angle, start_params
+from suture_bt.perception.fit_starts import (
+    DISTINCT,
+    diverse,
+    ends_moved,
+    rot_angle,
+    start_params,
+)
 from suture_bt.perception.fit_terms import (  # noqa: F401 - re-exported
     END_PRIOR_SHARE,
     EndPriorTerm,
@@ -84,17 +90,6 @@ from suture_bt.perception.tissue_cut import TissueCut
 #: A clearly different second-stage pose costing at most this much more than the best also
 #: seeds the second search (1.3 gave the same answers on the benchmarks for 10 ms more).
 RESEED_RIVAL_RATIO = 1.1
-
-
-def ends_moved(ends: np.ndarray, tried: Sequence) -> float:
-    """How far (px) the end pixels ``ends`` (2, 2) lie from the nearest of the end hypotheses
-    ``tried`` (the farther end of the pair, either way round; inf: none tried)."""
-    if not len(tried):
-        return float("inf")
-    h = np.asarray(tried, float)  # (H, 2 ends, 2)
-    same = np.linalg.norm(h - ends[None], axis=2).max(1)
-    swapped = np.linalg.norm(h - ends[None, ::-1], axis=2).max(1)
-    return float(np.minimum(same, swapped).min())
 
 
 @dataclass
