@@ -30,8 +30,8 @@ from suture_bt.perception.prior_seeds import seed_poses
 from suture_bt.perception.rival_probe import (
     MAX_RIVAL_RATIO,
     MAX_TIE_RATIO,
-    distinct,
     pose_offset,
+    tie_ratio,
 )
 
 #: A keypoint this confident anchors its end even when the other end's keypoint is weak
@@ -230,10 +230,8 @@ class FitAttempts:
             return fit
         if not again.cost < fit.cost:
             return fit
-        T, T_first = again.T_cam_needle, fit.T_cam_needle
-        if not (distinct(T, T_first) and distinct(self.model.swapped(T), T_first)):
-            return again
-        ratio = fit.cost / again.cost if again.cost > 0 else float("inf")
+        poses = np.stack([again.T_cam_needle, fit.T_cam_needle])
+        ratio = tie_ratio(0, poses, np.array([again.cost, fit.cost]), np.ones(2, bool), self.model)
         if not ratio < again.rival_ratio:
             return again
-        return replace(again, rival_ratio=ratio, rival_offset=pose_offset(T_first, T))
+        return replace(again, rival_ratio=ratio, rival_offset=pose_offset(poses[1], poses[0]))
