@@ -227,3 +227,31 @@ def test_a_keypoint_on_the_arcs_bulge_does_not_lead_to_a_confident_mirror_answer
     loc.refit_moved_px = float("inf")
     est = loc.localize(left, right)
     assert pose_errors(est.T_cam_needle, T)[1] > 90.0  # the old answer, for the record
+
+
+def test_an_edge_on_needle_is_not_answered_as_its_depth_mirror_twin():
+    """Session 26's occluded-rate seed 6289076, ``occluded`` #283: a held needle seen nearly
+    edge-on, 119 mm away. No start of the search fell into its basin, and its depth-mirror
+    twin (the same end pixels, the arc turned to -psi) was answered 14.4 mm / 146° off with a
+    predicted spread of 0.17°. The twin probe descends from the answer's twin and finds it."""
+    stereo_model, left, right, T, _, tissue = task_scene("occluded", 283, seed=6289076)
+    loc = NeedleLocalizer(stereo_model, tissue=tissue)
+    est = loc.localize(left, right)
+    pos, ang = pose_errors(est.T_cam_needle, T)
+    assert pos < 0.5 and ang < 0.5  # 0.15 mm / 0.1 deg
+    loc.fitter.probe_twin = False
+    est = loc.localize(left, right)
+    assert pose_errors(est.T_cam_needle, T)[1] > 90.0  # the old answer, for the record
+
+
+def test_a_highlight_in_one_eye_does_not_set_the_needles_depth():
+    """Session 26's occluded-rate seed 11493571, ``occluded`` #123: a needle held by PSM1,
+    85 mm away; a white highlight on the jaw joins the right eye's mask. It dragged the masks'
+    disparity to 39 mm, which overruled the keypoints' 96 mm, widened the thickness gate to
+    keep the highlight, and the arc bent into it: 1.4 mm / 7.7° off, spread 0.14°. The wire's
+    own thickness (3 px: a wire about 90 mm away) says which depth to believe."""
+    stereo_model, left, right, T, _, tissue = task_scene("occluded", 123, seed=11493571)
+    loc = NeedleLocalizer(stereo_model, tissue=tissue)
+    est = loc.localize(left, right)
+    pos, ang = pose_errors(est.T_cam_needle, T)
+    assert pos < 1.0 and ang < 2.5  # 0.28 mm / 1.3 deg

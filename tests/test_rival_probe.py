@@ -6,6 +6,8 @@ take a Task 3 start answer stopped 5° off into the needle's own basin. A tie is
 apart from the answer's base ↔ tip swap, which is the same outline. Probes run together give
 each its own result, to the bit."""
 
+from functools import partial
+
 import numpy as np
 import pytest
 from perception_helpers import pose_errors
@@ -33,6 +35,7 @@ from suture_bt.perception.rival_probe import (
     rival,
     slide_starts,
     tie_ratio,
+    twin_starts,
 )
 
 
@@ -151,6 +154,32 @@ def test_from_a_pose_slid_along_its_circle_the_slide_probe_finds_the_needle():
     assert len(x) == 1 and np.isfinite(cost[0])
     pos, ang = pose_errors(params_to_pose(x, st.left, MODEL)[0], T)
     assert pos < 0.3 and ang < 1.0
+
+
+def test_twin_starts_keep_the_end_pixels_and_turn_the_arc_to_minus_psi():
+    st, T, *_ = _scene_1080p(5, 0.0)
+    starts = twin_starts(T, MODEL, st.left)
+    x = pose_to_params(T[None], st.left, MODEL)[0]
+    xs = pose_to_params(starts, st.left, MODEL)
+    assert len(starts) >= 2
+    assert np.allclose(xs[:, :4], x[:4], atol=1e-6)
+    assert np.allclose(xs[:, 5], -x[5])
+    assert all(distinct(S, T) for S in starts)
+
+
+def test_from_the_depth_mirror_twin_the_twin_probe_finds_the_needle():
+    """Session 27: a nearly edge-on held needle (development seed 6289076, ``occluded`` #283)
+    was answered as this twin, 14 mm / 146° off at 3.3× the needle's cost, because no start
+    of the search fell into the needle's basin."""
+    st, T, left, right, _ = _scene_1080p(5, 0.0)
+    rays = edge_rays(st, edge_points(left), edge_points(right))
+    twin = partial(twin_starts, cam=st.left)
+    for mirror in twin_starts(T, MODEL, st.left):
+        x_off = pose_to_params(mirror[None], st.left, MODEL)[0]
+        probe = RivalProbe(st, MODEL, n_mid=2, n_polish=1, starts=twin)
+        x, cost = probe(x_off, FitRays(rays, rays, rays), [], "geman_mcclure")
+        errors = [pose_errors(P, T) for P in params_to_pose(x, st.left, MODEL)]
+        assert any(pos < 0.3 and ang < 1.0 for pos, ang in errors)
 
 
 def test_near_starts_turn_the_answer_a_few_degrees_about_its_centre():

@@ -2,7 +2,8 @@
 pixels at full resolution, with the gate width and depth hint the stereo pair measures.
 
 The coarse blob at the trusted keypoints gates a colour test (:mod:`colour_refine`); the
-masks' stereo disparity (:mod:`mask_disparity`) checks the keypoints' depth; grey blobs thicker
+masks' stereo disparity (:mod:`mask_disparity`) checks the keypoints' depth, the wire's own
+thickness (:mod:`wire_width`) deciding when the two disagree; grey blobs thicker
 than the widest plausible wire (jaws, shaft) are dropped, band pieces a jaw cut off are added
 back (:mod:`needle_ends`), occluder rims are dropped and occluders marked (:mod:`occlusion`).
 """
@@ -25,6 +26,7 @@ from suture_bt.perception.mask_disparity import mask_disparity
 from suture_bt.perception.needle_ends import with_band_pieces
 from suture_bt.perception.occlusion import with_occluder, without_occluder_rims
 from suture_bt.perception.refusal import NeedleNotFound
+from suture_bt.perception.wire_width import thin_for
 
 #: Fewest full-resolution needle pixels per eye to attempt a fit.
 MIN_NEEDLE_PIXELS = 15
@@ -68,7 +70,8 @@ class NeedleMasks:
         shaft) are dropped. That width comes from the nearer of the keypoints' and the masks'
         stereo depths (a wrong depth must not make the gate thinner than the wire), else from
         the nearest working distance. A keypoint depth the masks contradict is not used as
-        the fit's hint. ``anchors`` are each eye's trusted end keypoints in coarse px
+        the fit's hint, unless the masks' wire is as thin as that depth says and far too thin
+        for their own disparity (a blob in one eye dragged it); then the disparity is dropped. ``anchors`` are each eye's trusted end keypoints in coarse px
         (None: the largest coarse blob is the needle).
         """
         # Pieces of one needle lie within its chord of each other, at the nearest distance.
@@ -86,16 +89,23 @@ class NeedleMasks:
                     f"the network sees no needle in the {name} image", unseen_eye=name
                 )
             raw.append(refine_mask(img, coarse, scale, self.rule))
-        fb = self.stereo.left.fx * self.stereo.baseline
+        fx_left = self.stereo.left.fx
+        fb = fx_left * self.stereo.baseline
         disp = mask_disparity(raw[0], raw[1], fb / MAX_DEPTH, fb / MIN_DEPTH)
         mask_depth = fb / disp if disp is not None and disp > 0 else None
         depths = [z for z in (depth, mask_depth) if z is not None]
         if depth is not None and mask_depth is not None:
             if abs(depth / mask_depth - 1.0) > DEPTH_AGREEMENT:
-                # Keypoints matched wrongly between the eyes (one on a jaw tip): the masks'
-                # depth stands alone.
-                depth = None
-                depths = [mask_depth]
+                masks = [v.mask for v in raw]
+                if thin_for(masks, depth, mask_depth, self.model.wire_radius, fx_left):
+                    # A blob of needle colour in one eye (a jaw's highlight) dragged the
+                    # masks' disparity: the wire is as thin as the keypoints' depth says.
+                    depths = [depth]
+                else:
+                    # Keypoints matched wrongly between the eyes (one on a jaw tip): the
+                    # masks' depth stands alone.
+                    depth = None
+                    depths = [mask_depth]
         # The nearest the needle can be: the widest it can look.
         near = max(0.85 * min(depths), MIN_DEPTH) if depths else None
         z_near = NEAR_UNMEASURED if near is None else near

@@ -17,6 +17,7 @@ The answer is then probed for a clearly different pose of near-equal cost (:mod:
 
 from __future__ import annotations
 
+import functools
 from collections.abc import Sequence
 from dataclasses import dataclass, field
 
@@ -83,6 +84,7 @@ from suture_bt.perception.rival_probe import (
     probe_together,
     rival,
     slide_starts,
+    twin_starts,
     tie_ratio,
 )
 from suture_bt.perception.tissue_cut import TissueCut
@@ -143,6 +145,9 @@ class PoseFitter:
     #: Whether the answer is also turned by a few degrees in search of a cheaper basin next to
     #: it (:mod:`rival_probe`).
     probe_near: bool = True
+    #: Whether the answer's depth-mirror twin with the same end pixels is also descended from
+    #: (:func:`~rival_probe.twin_starts`; a cheaper result replaces the answer).
+    probe_twin: bool = True
     #: The task's known tissue solid as convex pieces of world (point, outward normal) planes
     #: (:func:`~suture_bt.geometry.tissue_surface.solid_pieces`; None: unknown): the arc
     #: inside it is hidden, and the seen wire ends where it enters (:mod:`tissue_cut`).
@@ -364,6 +369,9 @@ class PoseFitter:
         b, ok, misses = chosen
         small = {"n_mid": 2, "n_polish": 1}
         probes = []
+        if self.probe_twin:
+            twin = functools.partial(twin_starts, cam=self.stereo.left)
+            probes.append(RivalProbe(self.stereo, self.model, starts=twin, **small))
         if self.probe_slides and hidden_end:
             probes.append(RivalProbe(self.stereo, self.model, starts=slide_starts, **small))
         if self.probe_near:

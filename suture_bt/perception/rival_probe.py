@@ -49,7 +49,11 @@ from suture_bt.geometry import NeedleModel
 from suture_bt.interfaces import StereoCameraModel
 from suture_bt.perception.edge_residuals import EdgeRays
 from suture_bt.perception.fit_solver import levenberg_marquardt
-from suture_bt.perception.needle_projection import params_to_pose, pose_to_params
+from suture_bt.perception.needle_projection import (
+    params_to_pose,
+    phi_from_base_depth,
+    pose_to_params,
+)
 
 #: Turns (deg) of the answer the probe starts from.
 PROBE_ANGLES_DEG = (-40.0, -20.0, 20.0, 40.0)
@@ -124,6 +128,19 @@ def slide_starts(T: np.ndarray, model: NeedleModel) -> np.ndarray:
     (turned about the needle's z axis through the arc centre)."""
     R = Rotation.from_rotvec(np.outer(np.deg2rad(SLIDE_ANGLES_DEG), T[:3, 2])).as_matrix()
     return _turned_about_centre(T, R)
+
+
+def twin_starts(T: np.ndarray, model: NeedleModel, cam) -> np.ndarray:
+    """Poses (K, 4, 4, left camera) of ``T``'s depth-mirror twin with the same end pixels: the
+    arc turned to ``-psi`` about its chord, with the chord's other root at the base's depth
+    and with ``π - phi`` (the twin of a weak-perspective view); infeasible ones left out."""
+    x = pose_to_params(T[None], cam, model)[0]
+    base = T[:3, :3] @ model.base + T[:3, 3]
+    roots = phi_from_base_depth(x[:2], x[2:4], base[2], cam, model)
+    phis = [p for p in (*roots, np.pi - x[4]) if abs(p - x[4]) > 1e-3]
+    xs = np.array([[*x[:4], p, -x[5]] for p in phis])
+    poses = params_to_pose(xs, cam, model)
+    return poses[np.all(np.isfinite(poses), axis=(1, 2))]
 
 
 def pose_offset(Ta: np.ndarray, Tb: np.ndarray) -> tuple[float, float]:
