@@ -71,8 +71,9 @@ class NeedleMasks:
         stereo depths (a wrong depth must not make the gate thinner than the wire), else from
         the nearest working distance. A keypoint depth the masks contradict is not used as
         the fit's hint, unless the masks' wire is as thin as that depth says and far too thin
-        for their own disparity (a blob in one eye dragged it); then the disparity is dropped. ``anchors`` are each eye's trusted end keypoints in coarse px
-        (None: the largest coarse blob is the needle).
+        for their own disparity (a blob in one eye dragged it); then the disparity is
+        dropped. ``anchors`` are each eye's trusted end keypoints in coarse px (None: the
+        largest coarse blob is the needle).
         """
         # Pieces of one needle lie within its chord of each other, at the nearest distance.
         chord = self.model.chord

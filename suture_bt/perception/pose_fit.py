@@ -84,8 +84,8 @@ from suture_bt.perception.rival_probe import (
     probe_together,
     rival,
     slide_starts,
-    twin_starts,
     tie_ratio,
+    twin_starts,
 )
 from suture_bt.perception.tissue_cut import TissueCut
 
