@@ -371,7 +371,7 @@ class PoseFitter:
         probes = []
         if self.probe_twin:
             twin = functools.partial(twin_starts, cam=self.stereo.left)
-            probes.append(RivalProbe(self.stereo, self.model, starts=twin, **small))
+            probes.append(RivalProbe(self.stereo, self.model, starts=twin, n_mid=1, n_polish=1))
         if self.probe_slides and hidden_end:
             probes.append(RivalProbe(self.stereo, self.model, starts=slide_starts, **small))
         if self.probe_near:
