@@ -7,7 +7,8 @@
 3. The stereo pose fit (:mod:`fit_attempts`, :mod:`pose_fit`) starts from the left keypoints,
    with a depth hint from their stereo disparity, and optionally a warm start from the
    previous estimate; an answer with a clearly different pose of near-equal cost nearby
-   (:mod:`rival_probe`) is refused.
+   (:mod:`rival_probe`) is refused, and so is one whose predicted spread is looser than the
+   caller's priors and the tissue's share of the arc allow (:mod:`spread_limits`).
 4. The fitted arc's unseen part must be hidden by something (:mod:`exposure_gate`,
    :mod:`unseen_arc`: a jaw or shaft, the border, the tissue where the caller's tissue model
    says it can hide it), and no wire both eyes see may lie deep inside the known tissue; else
@@ -52,7 +53,6 @@ from suture_bt.perception.needle_masks import (  # noqa: F401 - the working rang
 )
 from suture_bt.perception.needle_prior import (
     AcrossJawsPrior,
-    HeldPrior,
     NeedlePrior,
     PredictedPosePrior,
     check_across_jaws,
@@ -72,6 +72,15 @@ from suture_bt.perception.pose_fit import (
     PoseFitResult,
     PoseFitter,
 )
+from suture_bt.perception.spread_limits import (  # noqa: F401 - the limits, re-exported
+    HELD_PIN_TOLERANCE,
+    MAX_ANGLE_STD_DEG,
+    MAX_ANGLE_STD_DEG_HELD,
+    MAX_ANGLE_STD_DEG_IN_TISSUE,
+    MAX_ANGLE_STD_DEG_UNAIDED,
+    angle_std_limit,
+    check_spread_in_tissue,
+)
 from suture_bt.perception.unseen_arc import ArcExposure
 
 #: A keypoint heatmap peak below this probability is not trusted (the mask's ends are used).
@@ -82,24 +91,6 @@ MAX_CHORD_MARGIN = 1.2
 MIN_END_SEPARATION_PX = 8.0
 #: The fit searches no nearer than this share of the nearest stereo depth (keypoints', masks').
 NEAR_SLACK = 0.7
-#: A final fit whose predicted angle spread (deg; see
-#: :func:`~suture_bt.perception.pose_fit.pose_uncertainty`) exceeds this is refused: the seen
-#: piece of the needle leaves its plane, or its course behind an occluder, free.
-MAX_ANGLE_STD_DEG = 2.0
-#: The same limit for a needle a held-by prior pins to a jaw (tolerance ≤ HELD_PIN_TOLERANCE):
-#: on the development seed's task sets (6173) every answer the 2° limit refused there was
-#: right (held_presented 5 of 5, in a port 3 of 3; spreads up to 3.8°), while the wrong
-#: answers loose enough to matter spread 22-24°.
-MAX_ANGLE_STD_DEG_HELD = 4.0
-#: The same limit when the caller gives no prior: nothing but the image then checks the arc's
-#: plane. On the needle reports of session 18 (seeds 71715578 and 51102751) two needles in a
-#: port, seen only outside the entry, were answered 6.2° and 8.1° off with spreads 1.6° and
-#: 1.9° (and a development one, seed 2000, 7.1° off at 2.0°); over 1,559 right answers
-#: without priors (reports of sessions 15-18 and development seeds 1000, 2000, 6173) 11 spread
-#: more than 1.5°. A refusal costs the caller a second look; a wrong plane costs a throw.
-MAX_ANGLE_STD_DEG_UNAIDED = 1.5
-#: A held-by prior at most this loose (m: a calibrated holder's) pins the arc.
-HELD_PIN_TOLERANCE = 0.0015
 
 
 def _net_input(rgb: np.ndarray, width: int) -> tuple[np.ndarray, float]:
@@ -318,6 +309,9 @@ class NeedleLocalizer:
         if previous is None and predicted:
             previous = self.stereo.left.T_cam_world @ np.asarray(predicted[0].T_world_needle)
         fit = self._fit((left, right), views, ends, depth, half_width, previous, kp, score, priors)
+        check_spread_in_tissue(
+            fit.T_world_needle, fit.angle_std_deg, priors, self.tissue, self.model
+        )
         exposure = self._exposure((left, right), views, fit.T_cam_needle, priors)
         t3 = time.perf_counter()
         jaws = [p for p in priors if isinstance(p, AcrossJawsPrior)]
@@ -398,14 +392,6 @@ class NeedleLocalizer:
         return attempts(images, views, ends, depth, half_width, previous, kp, score, priors)
 
     def _angle_std_limit(self, priors) -> float:
-        """The loosest predicted angle spread answered: narrower without priors
-        (``max_angle_std_deg`` scaled as MAX_ANGLE_STD_DEG_UNAIDED is to MAX_ANGLE_STD_DEG),
-        wider when a held-by prior pins a point of the arc to the jaw within
-        HELD_PIN_TOLERANCE (the spread is the image's alone, and the prior has already chosen
-        among the candidates)."""
-        if not priors:
-            return self.max_angle_std_deg * MAX_ANGLE_STD_DEG_UNAIDED / MAX_ANGLE_STD_DEG
-        pinned = any(isinstance(p, HeldPrior) and p.tolerance <= HELD_PIN_TOLERANCE for p in priors)
-        if not pinned:
-            return self.max_angle_std_deg
-        return max(self.max_angle_std_deg, self.max_angle_std_deg_held)
+        """The loosest predicted angle spread answered for these priors
+        (:func:`~suture_bt.perception.spread_limits.angle_std_limit`)."""
+        return angle_std_limit(priors, self.max_angle_std_deg, self.max_angle_std_deg_held)
