@@ -387,14 +387,21 @@ def test_a_second_search_from_the_best_poses_own_ends_finds_the_mirror_twin():
     st, T, left, right, ends = _scene_1080p(10, 0.0)
     occ, short, _ = _tip_hidden(st, T, left, right, ends)
     alt = [tuple(ends + np.array([[30.0, 10.0], [-20.0, 25.0]]))]
-    first = PoseFitter(st, MODEL, n_reseed=0, probe_slides=False).fit(*occ, short, alternatives=alt)
+    alone = {"probe_slides": False, "probe_twin": False}
+    first = PoseFitter(st, MODEL, n_reseed=0, **alone).fit(*occ, short, alternatives=alt)
     assert pose_errors(first.T_cam_needle, T)[0] > 10.0
-    res = PoseFitter(st, MODEL).fit(*occ, short, alternatives=alt)
+    res = PoseFitter(st, MODEL, probe_twin=False).fit(*occ, short, alternatives=alt)
     pos, ang = pose_errors(res.T_cam_needle, T)
     assert pos < 1.0 and ang < 4.0 and res.cost < first.cost
     # The caller can say no end is hidden: then no second search (and no slide).
-    told = PoseFitter(st, MODEL).fit(*occ, short, alternatives=alt, hidden_end=False)
+    told = PoseFitter(st, MODEL, probe_twin=False).fit(
+        *occ, short, alternatives=alt, hidden_end=False
+    )
     np.testing.assert_allclose(told.T_cam_needle, first.T_cam_needle)
+    # The twin probe (session 27) reaches the needle from the twin on its own, too.
+    twin = PoseFitter(st, MODEL, n_reseed=0, probe_slides=False).fit(*occ, short, alternatives=alt)
+    pos, ang = pose_errors(twin.T_cam_needle, T)
+    assert pos < 1.0 and ang < 4.0
 
 
 @pytest.mark.parametrize("ratio, n_seeds", [(0.0, 1), (1e6, 2)])
