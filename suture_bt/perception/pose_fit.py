@@ -12,7 +12,8 @@ tilt-mirror ambiguity), on the parameters of :mod:`needle_projection`: Cauchy wh
 (wide basins), Geman-McClure for the final polish and choice, so a few stray mask pixels (a
 sliver of jaw the colour test kept) cannot pull the answer onto a pose that half-explains them.
 Optional extra terms: free space (experimental, off) and confident keypoints (search only).
-The answer is then probed for a clearly different pose of near-equal cost (:mod:`rival_probe`).
+The answer is then probed for a cheaper pose (its depth-mirror twin, slides along its circle,
+small turns) and for a clearly different pose of near-equal cost (:mod:`rival_probe`).
 """
 
 from __future__ import annotations
@@ -361,11 +362,11 @@ class PoseFitter:
         """The polished finals with the probes' poses (:mod:`rival_probe`) added: (x, cost,
         answer index, prior-consistent, prior misses, which rows are rivals of the answer).
 
-        Slides and small turns are probes whose cheaper result replaces the answer (never a
-        rival); then the rival probe. Each starts from the answer the probes before it left,
-        so all of them descend together from the polished answer and a probe is run again
-        only after an earlier one has moved it (the same results with one descent per stage
-        instead of three)."""
+        The twin, slides and small turns are probes whose cheaper result replaces the answer
+        (never a rival); then the rival probe. Each starts from the answer the probes before
+        it left, so all of them descend together from the polished answer and a probe is run
+        again only after an earlier one has moved it (the same results with one descent per
+        stage instead of four)."""
         b, ok, misses = chosen
         small = {"n_mid": 2, "n_polish": 1}
         probes = []
