@@ -103,14 +103,20 @@ def test_a_needle_going_into_the_ridge_is_found_from_the_tissue_alone():
     """Development scene 9 of `occluded` (seed 6173): an edge-on needle half inside the ridge
     through an entry port, no priors. Given the phantom's solid, the fit starts from the wire
     entering at the outline's end and finds it; with the tissue model alone (no solid) the
-    answer was refused."""
+    answer was refused. Since session 27 the localiser refuses the found pose too, without
+    priors: its spread (1.4°) is looser than an arc in the tissue may be (see
+    ``spread_limits``), so the limit is lifted to see the fit's answer."""
     from perception_helpers import pose_errors, task_scene
 
     from suture_bt.perception.needle_localizer import NeedleLocalizer
     from suture_bt.perception.refusal import NeedleNotFound
 
     st, left, right, T, _, tissue = task_scene("occluded", 9)
-    found = NeedleLocalizer(st, tissue=tissue).localize(left, right)
+    loc = NeedleLocalizer(st, tissue=tissue)
+    with pytest.raises(NeedleNotFound, match="inside the tissue"):
+        loc.localize(left, right)
+    loc.max_angle_std_deg_in_tissue = float("inf")
+    found = loc.localize(left, right)
     pos, ang = pose_errors(found.T_cam_needle, T)
     assert pos < 0.5 and ang < 2.0
     with pytest.raises(NeedleNotFound):

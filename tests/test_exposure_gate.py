@@ -16,11 +16,13 @@ def _twin_scene():
     """test_unseen_arc's case: the tip half behind a grey jaw; the fit without priors answers
     the tilt-mirror twin, about 2.8 mm of whose arc shows over the black background. (The
     near probe moves it to a neighbouring twin 130° off that shows its arc in one eye only,
-    which the localiser's rival probe refuses: off here, so the gate's own case stays.)"""
+    which the localiser's rival probe refuses, and the twin probe back to the needle: both off
+    here, so the gate's own case stays.)"""
     st, T, occ, short, kw = _twin_case()
     _, _, left, right, _ = _scene_1080p(10, 0.0)
     images = _images_with_cover(st, (left, right), occ, px=2)
-    twin = PoseFitter(st, MODEL, probe_near=False).fit(*occ, short, **kw).T_cam_needle
+    fitter = PoseFitter(st, MODEL, probe_near=False, probe_twin=False)
+    twin = fitter.fit(*occ, short, **kw).T_cam_needle
     return st, T, twin, images, tuple(occ)
 
 

@@ -148,6 +148,8 @@ class NeedleLocalizer:
         self.max_rms_px = max_rms_px
         self.max_angle_std_deg = max_angle_std_deg
         self.max_angle_std_deg_held = max_angle_std_deg_held
+        #: Without priors, the loosest spread (deg) answered for an arc the tissue hides in part.
+        self.max_angle_std_deg_in_tissue = MAX_ANGLE_STD_DEG_IN_TISSUE
         #: A clearly different pose within this ratio of the answer's cost refuses it.
         self.max_rival_ratio = MAX_RIVAL_RATIO
         #: A clearly different candidate within this ratio of the answer's cost is a tie: refused.
@@ -310,7 +312,12 @@ class NeedleLocalizer:
             previous = self.stereo.left.T_cam_world @ np.asarray(predicted[0].T_world_needle)
         fit = self._fit((left, right), views, ends, depth, half_width, previous, kp, score, priors)
         check_spread_in_tissue(
-            fit.T_world_needle, fit.angle_std_deg, priors, self.tissue, self.model
+            fit.T_world_needle,
+            fit.angle_std_deg,
+            priors,
+            self.tissue,
+            self.model,
+            self.max_angle_std_deg_in_tissue,
         )
         exposure = self._exposure((left, right), views, fit.T_cam_needle, priors)
         t3 = time.perf_counter()

@@ -64,11 +64,12 @@ def check_spread_in_tissue(
     priors: Sequence[NeedlePrior],
     tissue: Callable[[np.ndarray], np.ndarray] | None,
     model: NeedleModel,
+    limit: float = MAX_ANGLE_STD_DEG_IN_TISSUE,
 ) -> None:
     """Raise NeedleNotFound when, without priors, at least IN_TISSUE_SHARE of the answer's
     arc lies inside the known ``tissue`` (world points → bool) and its spread exceeds
-    MAX_ANGLE_STD_DEG_IN_TISSUE."""
-    if priors or tissue is None or not angle_std_deg > MAX_ANGLE_STD_DEG_IN_TISSUE:
+    ``limit`` (deg)."""
+    if priors or tissue is None or not angle_std_deg > limit:
         return
     arc = model.point_at(np.linspace(model.base_angle, model.tip_angle, 64))
     T = np.asarray(T_world_needle, float)
@@ -76,7 +77,7 @@ def check_spread_in_tissue(
     if share >= IN_TISSUE_SHARE:
         raise NeedleNotFound(
             f"the seen part leaves the pose loose: predicted angle spread {angle_std_deg:.1f} "
-            f"deg (> {MAX_ANGLE_STD_DEG_IN_TISSUE:.1f} for an arc {100 * share:.0f} % inside "
+            f"deg (> {limit:.1f} for an arc {100 * share:.0f} % inside "
             "the tissue, without priors): the seen part does not pin the plane of a needle "
             "that goes into the tissue"
         )
