@@ -27,7 +27,7 @@ def _below(z: float):
 
 
 def _share_below(T: np.ndarray, z: float) -> float:
-    arc = MODEL.point_at(np.linspace(MODEL.base_angle, MODEL.tip_angle, 64))
+    arc = MODEL.centerline(64)
     return float(np.mean((arc @ T[:3, :3].T + T[:3, 3])[:, 2] < z))
 
 

@@ -71,7 +71,7 @@ def check_spread_in_tissue(
     ``limit`` (deg)."""
     if priors or tissue is None or not angle_std_deg > limit:
         return
-    arc = model.point_at(np.linspace(model.base_angle, model.tip_angle, 64))
+    arc = model.centerline(64)
     T = np.asarray(T_world_needle, float)
     share = float(np.mean(tissue(arc @ T[:3, :3].T + T[:3, 3])))
     if share >= IN_TISSUE_SHARE:
