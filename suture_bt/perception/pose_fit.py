@@ -18,7 +18,6 @@ small turns) and for a clearly different pose of near-equal cost (:mod:`rival_pr
 
 from __future__ import annotations
 
-import functools
 from collections.abc import Sequence
 from dataclasses import dataclass, field
 
@@ -26,6 +25,7 @@ import numpy as np
 
 from suture_bt.geometry import NeedleModel
 from suture_bt.interfaces import StereoCameraModel
+from suture_bt.perception.answer_probes import probed
 from suture_bt.perception.edge_kernel import edge_normal_equations
 from suture_bt.perception.edge_residuals import (  # noqa: F401 - re-exported
     N_THETA_GRID,
@@ -78,16 +78,7 @@ from suture_bt.perception.needle_projection import (
 )
 from suture_bt.perception.prior_term import HeldPlaceTerm, PriorTerm
 from suture_bt.perception.refusal import NeedleNotFound
-from suture_bt.perception.rival_probe import (
-    FitRays,
-    RivalProbe,
-    near_starts,
-    probe_together,
-    rival,
-    slide_starts,
-    tie_ratio,
-    twin_starts,
-)
+from suture_bt.perception.rival_probe import FitRays, rival, tie_ratio
 from suture_bt.perception.tissue_cut import TissueCut
 
 #: A clearly different second-stage pose costing at most this much more than the best also
@@ -324,8 +315,8 @@ class PoseFitter:
             raise NeedleNotFound("pose fit diverged")
         b, ok, misses = choose_answer(self._world(xf), cf, priors, self.model)
         amb = float(np.min(np.delete(cf, b)) - cf[b]) if len(cf) > 1 else float("inf")
-        xf, cf, b, ok, misses, near = self._probed(
-            xf, cf, (b, ok, misses), FitRays(rays, coarse, mid), polish, priors, hidden_end
+        xf, cf, b, ok, misses, near = probed(
+            self, xf, cf, (b, ok, misses), FitRays(rays, coarse, mid), polish, priors, hidden_end
         )
         poses = params_to_pose(xf, cam, self.model)
         rival_ratio, rival_offset = rival(b, poses, cf, ok & near)
@@ -357,58 +348,6 @@ class PoseFitter:
             tie_ratio=tie,
             ends_moved_px=ends_moved(np.asarray(end_pixels(cam, T, self.model)), tried),
         )
-
-    def _probed(self, xf, cf, chosen, rays: FitRays, polish: list, priors, hidden_end: bool):
-        """The polished finals with the probes' poses (:mod:`rival_probe`) added: (x, cost,
-        answer index, prior-consistent, prior misses, which rows are rivals of the answer).
-
-        The twin, slides and small turns are probes whose cheaper result replaces the answer
-        (never a rival); then the rival probe. Each starts from the answer the probes before
-        it left, so all of them descend together from the polished answer and a probe is run
-        again only after an earlier one has moved it (the same results with one descent per
-        stage instead of four)."""
-        b, ok, misses = chosen
-        small = {"n_mid": 2, "n_polish": 1}
-        probes = []
-        if self.probe_twin:
-            twin = functools.partial(twin_starts, cam=self.stereo.left)
-            probes.append(RivalProbe(self.stereo, self.model, starts=twin, n_mid=1, n_polish=1))
-        if self.probe_slides and hidden_end:
-            probes.append(RivalProbe(self.stereo, self.model, starts=slide_starts, **small))
-        if self.probe_near:
-            probes.append(
-                RivalProbe(
-                    self.stereo, self.model, starts=near_starts, apart_from_answer=False, **small
-                )
-            )
-        rivals = RivalProbe(self.stereo, self.model) if self.probe_rivals else None
-        if rivals:
-            probes.append(rivals)
-        near = np.zeros(len(xf), bool)
-        start = xf[b].copy()
-        results = probe_together(probes, [start] * len(probes), rays, polish, self.final_loss)
-        for i, probe in enumerate(probes):
-            if not np.array_equal(xf[b], start):  # an earlier probe moved the answer
-                start = xf[b].copy()
-                rest = probes[i:]
-                again = probe_together(rest, [start] * len(rest), rays, polish, self.final_loss)
-                results[i:] = again
-            xs, cs = results[i]
-            cs = np.where(self._in_range(xs), cs, np.inf)
-            if probe is rivals:
-                # Rivals are the probe's poses (and the first answer, if one of them replaces
-                # it): the other finals are separate basins, mostly the mirror twin, whose
-                # small cost gap decides reliably on a whole outline (its own refusals: the
-                # priors, the spread).
-                near = np.concatenate([near, np.ones(len(xs), bool)])
-                near[b] = True
-                xf, cf = np.concatenate([xf, xs]), np.concatenate([cf, cs])
-            else:
-                keep = cs < cf[b]  # a cheaper pose only
-                xf, cf = np.concatenate([xf, xs[keep]]), np.concatenate([cf, cs[keep]])
-                near = np.concatenate([near, np.zeros(keep.sum(), bool)])
-            b, ok, misses = choose_answer(self._world(xf), cf, priors, self.model)
-        return xf, cf, b, ok, misses, near
 
     def _with_solid(self, ports) -> TissueCut:
         """The cut of the port priors' planes (depth 0) and the known solid's pieces (each

@@ -1,0 +1,54 @@
+"""The answer's probes: the fitter's flags choose which run, in the documented order (the
+rival probe last), and ``probed`` replaces an answer that is the needle's depth-mirror twin by
+the needle (a cheaper pose, never a rival), while a right answer stays the answer."""
+
+import numpy as np
+from perception_helpers import pose_errors
+from test_pose_fit import MODEL, _scene_1080p
+
+from suture_bt.perception.answer_probes import answer_probes, probed
+from suture_bt.perception.edge_residuals import edge_rays
+from suture_bt.perception.mask_view import edge_points
+from suture_bt.perception.needle_projection import params_to_pose, pose_to_params
+from suture_bt.perception.pose_fit import PoseFitter
+from suture_bt.perception.rival_probe import FitRays, near_starts, slide_starts, twin_starts
+
+
+def _kinds(probes) -> list[str]:
+    names = {slide_starts: "slide", near_starts: "near"}
+    out = []
+    for p in probes:
+        starts = getattr(p.starts, "func", p.starts)
+        out.append("twin" if starts is twin_starts else names.get(starts, "rival"))
+    return out
+
+
+def test_the_fitters_flags_choose_the_probes_in_order_with_the_rival_probe_last():
+    st, *_ = _scene_1080p(5, 0.0)
+    fitter = PoseFitter(st, MODEL)
+    assert _kinds(answer_probes(fitter, hidden_end=True)) == ["twin", "slide", "near", "rival"]
+    assert _kinds(answer_probes(fitter, hidden_end=False)) == ["twin", "near", "rival"]
+    fitter = PoseFitter(st, MODEL, probe_twin=False, probe_rivals=False)
+    assert _kinds(answer_probes(fitter, hidden_end=False)) == ["near"]
+
+
+def _probed_from(T_answer, scene):
+    st, T, left, right, _ = scene
+    rays = edge_rays(st, edge_points(left), edge_points(right))
+    fitter = PoseFitter(st, MODEL)
+    xf = pose_to_params(T_answer[None], st.left, MODEL)
+    cf = np.array([np.inf])  # any probe's pose is cheaper than an unrated answer
+    got = probed(fitter, xf, cf, (0, None, None), FitRays(rays, rays, rays), [], [], False)
+    x, cost, b, _, _, near = got
+    return params_to_pose(x, st.left, MODEL), cost, b, near
+
+
+def test_an_answer_that_is_the_needles_twin_is_replaced_by_the_needle():
+    scene = _scene_1080p(5, 0.0)
+    st, T = scene[0], scene[1]
+    twin = twin_starts(T, MODEL, st.left)[0]
+    poses, cost, b, near = _probed_from(twin, scene)
+    pos, ang = pose_errors(poses[b], T)
+    assert pos < 0.3 and ang < 1.0
+    assert np.isfinite(cost[b])
+    assert near[b]  # the rival probe ran from the new answer, which its rivals sit around
