@@ -29,8 +29,14 @@ each eye sees (``seen_mm``), how close the fit came to a tie (``tie_ratio``,
 ``PoseFitResult.tie_ratio``; session 19's report files call an earlier form ``twin_ratio``)
 and how far its ends moved from the end hypotheses it started from (``ends_moved_px``).
 
+``--phantom heldout`` draws the phantom's pose per scene within the held-out campaigns' ranges
+(±20 mm in x/y, ±5 mm in z, ±20° about the vertical, ±5° tilt, every port in both images;
+``HELDOUT_PHANTOM``), rebuilds it there and gives the localiser that pose's tissue model, as
+the tree's localiser is given the task's known phantom; each row records the pose
+(``phantom``). The default keeps the SRC scene's phantom (the reports of sessions 12-27).
+
     python benchmarks/needle_pose.py [--json PATH] [--n 200] [--resolution 1920x1080]
-        [--prior none|held|port|task|both] [--set SET ...]
+        [--prior none|held|port|task|both] [--set SET ...] [--phantom default|heldout]
 """
 
 from __future__ import annotations
@@ -43,6 +49,7 @@ import time
 import needle_task_scenes
 import numpy as np
 import torch
+from heldout_phantom import PHANTOM_STREAM, move_phantom, task_scene
 from scipy.spatial.transform import Rotation
 from tqdm import tqdm
 
@@ -334,6 +341,7 @@ def run(
     max_angle_std_deg: float = MAX_ANGLE_STD_DEG,
     prior: str = "none",
     max_exposed: float | None = None,
+    phantom: str = "default",
 ) -> dict:
     """Results per set; the task sets under ``prior`` "both" (default for them when
     ``prior`` is "none") give ``SET`` (no priors) and ``SET+prior`` (task priors) on the same
@@ -361,12 +369,15 @@ def run(
             bar = tqdm(range(n), desc=f"{cond} {width}x{height}")
             for i in bar:
                 rng = np.random.default_rng([seed, ci, i])
+                pose = None
                 if task:
-                    s, task_priors = needle_task_scenes.BUILDERS[cond](sim, rng)
+                    s, task_priors, pose, rng = task_scene(sim, loc, cond, [seed, ci, i], phantom)
                     sim.apply(s)
                     left, mask = sim.render("left", s, rng)
                     frac, draws = _visible_fraction(sim, s, mask), 1
                 else:
+                    if phantom == "heldout":
+                        pose = move_phantom(sim, loc, [seed, ci, i, PHANTOM_STREAM])
                     s, left, frac, draws = _draw_scene(sim, cond, rng, i)
                 right, _ = sim.render("right", s, rng)
                 T_true = invert(sim.stereo.left.T_world_cam) @ s.T_world_needle
@@ -375,7 +386,7 @@ def run(
                     "visible": frac,
                     "depth_mm": T_true[2, 3] * 1e3,
                     "draws": draws,
-                }
+                } | ({} if pose is None else {"phantom": pose})
                 for m in modes:
                     pr = (task_priors if m == "task" else []) if task else _priors(sim, s, m)
                     rows[m].append(base | _localize_row(loc, left, right, T_true, pr))
@@ -420,6 +431,13 @@ def main(argv=None) -> int:
         "task sets: both (default: without and with the task priors), task or none",
     )
     ap.add_argument(
+        "--phantom",
+        choices=("default", "heldout"),
+        default="default",
+        help="the SRC scene's phantom (default), or a pose drawn per scene within the held-out "
+        "campaigns' ranges",
+    )
+    ap.add_argument(
         "--max-exposed-mm",
         type=float,
         help="refuse fits whose arc runs longer over unhidden background (default: the "
@@ -440,6 +458,7 @@ def main(argv=None) -> int:
         args.max_angle_std_deg,
         args.prior,
         None if args.max_exposed_mm is None else 1e-3 * args.max_exposed_mm,
+        args.phantom,
     )
     meta = {
         "resolution": [w, h],
@@ -448,6 +467,7 @@ def main(argv=None) -> int:
         "max_angle_std_deg": args.max_angle_std_deg,
         "prior": args.prior,
         "max_exposed_mm": args.max_exposed_mm,
+        "phantom": args.phantom,
         "seconds": time.time() - t0,
     }
     summary = {k: {kk: vv for kk, vv in v.items() if kk != "per_scene"} for k, v in res.items()}

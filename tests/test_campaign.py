@@ -21,6 +21,7 @@ from suture_bt.campaign.randomize import (
     draw,
     faults_supported,
     offset_magnitude,
+    phantom_pose_in_view,
     trial_scene_dict,
 )
 from suture_bt.campaign.report import write_report
@@ -91,6 +92,29 @@ def test_default_phantom_draws_are_kept_and_wide_ones_keep_every_port_in_view():
         assert in_view(camera, ports, PORT_MARGIN_PX)
         moved += np.hypot(*ph["position"][:2]) > 0.015
     assert moved >= 5  # the wide range is still used
+
+
+def test_a_phantom_pose_drawn_about_a_base_pose_stays_in_its_ranges_with_ports_in_view():
+    from suture_bt.campaign.randomize import PORT_MARGIN_PX
+    from suture_bt.campaign.resting_start import in_view
+    from suture_bt.geometry import PhantomModel
+    from suture_bt.sim.camera import stereo_model
+    from suture_bt.transforms import pose_to_transform
+
+    rz = Randomization(phantom_xy_mm=20, phantom_z_mm=5, phantom_yaw_deg=20, tilt_deg=5)
+    camera, p0, r0 = stereo_model(1920, 1080), (0.001, -0.002, 0.0), (0.0, 0.0, 0.1)
+    g = np.random.default_rng(5)
+    for _ in range(20):
+        pose = phantom_pose_in_view(rz, g, camera, p0, r0)
+        dp, dr = np.subtract(pose["position"], p0), np.degrees(np.subtract(pose["rpy"], r0))
+        assert np.all(np.abs(dp[:2]) <= 0.020 + 1e-9) and abs(dp[2]) <= 0.005 + 1e-9
+        assert np.all(np.abs(dr[:2]) <= 5 + 1e-6) and abs(dr[2]) <= 20 + 1e-6
+        T = pose_to_transform(pose["position"], pose["rpy"])
+        ports = np.array([port.position for port in PhantomModel(T).ports()])
+        assert in_view(camera, ports, PORT_MARGIN_PX)
+    far = Randomization(phantom_xy_mm=50, phantom_z_mm=50, phantom_yaw_deg=45, tilt_deg=15)
+    with pytest.raises(ValueError, match="no phantom pose with every port in view"):
+        phantom_pose_in_view(far, g, camera, (0.3, 0.0, 0.0))
 
 
 def test_resting_starts_lie_flat_on_the_tissue_in_both_views_and_move_with_the_phantom():

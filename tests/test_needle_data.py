@@ -36,6 +36,37 @@ def test_sampled_needles_never_pass_through_the_floor():
         sim.close()
 
 
+def test_a_moved_phantom_is_drawn_told_and_sampled_where_it_was_moved():
+    import pybullet as p
+
+    from suture_bt.transforms import pose_to_transform
+
+    sim = SimScene(320, 240)
+    try:
+        client = sim.world.client
+        n_bodies = p.getNumBodies(physicsClientId=client)
+        T = pose_to_transform((0.012, -0.008, 0.002), (0.03, -0.02, np.deg2rad(15.0)))
+        sim.move_phantom(T)
+        # The old tissue and floor are gone, the new ones drawn: as many bodies as before.
+        assert p.getNumBodies(physicsClientId=client) == n_bodies
+        np.testing.assert_allclose(sim.world.task.phantom.T_world_phantom, T)
+        np.testing.assert_allclose(sim.sampler.T_world_phantom, T)
+        port = sim.world.task.phantom.ports()[0]
+        in_phantom = sim.world.task.phantom.ports_in_phantom[0].T
+        np.testing.assert_allclose(port.position, (T @ in_phantom)[:3, 3], atol=1e-12)
+        np.testing.assert_allclose(sim.sampler.ports[0].position, port.position)
+        # The tissue bookkeeping moved with it: a point just below a moved port is inside.
+        assert sim.world.phantom.inside_tissue((port.position - 0.001 * port.normal)[None])[0]
+        # The port's dark square is drawn where the port now is (the tissue is pink).
+        s = sim.sampler.sample(np.random.default_rng(3), scenario="resting", zr=(0.08, 0.2))
+        sim.apply(s)
+        rgb, _ = sim.render("left", s, np.random.default_rng(0))
+        u, v = np.round(sim.stereo.left.project(port.position[None])[0]).astype(int)
+        assert rgb[v, u].max() < 60
+    finally:
+        sim.close()
+
+
 def test_data_command_writes_labelled_shards(tmp_path, capsys):
     assert main(["data", "needle", "--n", "2", "--out", str(tmp_path), "--seed", "3"]) == 0
     meta = json.loads(capsys.readouterr().out.strip().splitlines()[-1])

@@ -139,6 +139,25 @@ def test_without_priors_the_spread_limit_is_tighter_and_a_pinned_holder_loosens_
     assert unlimited._angle_std_limit(()) == np.inf
 
 
+def test_a_new_tissue_model_gives_the_fit_its_solid():
+    """A caller whose phantom moved sets the localiser's tissue; the fit's cut then hides the
+    arc inside the new phantom's solid, not the old one's."""
+    from suture_bt.geometry import PhantomModel
+    from suture_bt.perception.unseen_arc import phantom_tissue
+    from suture_bt.transforms import make_transform
+
+    st = stereo(1920, 1080)
+    eye = st.left.T_world_cam[:3, 3]
+    old = phantom_tissue(PhantomModel(), eye)
+    loc = NeedleLocalizer(st, net=_eager_net(), tissue=old)
+    assert loc.fitter.tissue_solid is old.pieces
+    moved = phantom_tissue(PhantomModel(make_transform(position=(0.01, 0.0, 0.0))), eye)
+    loc.tissue = moved
+    assert loc.tissue is moved and loc.fitter.tissue_solid is moved.pieces
+    loc.tissue = None
+    assert loc.fitter.tissue_solid is None
+
+
 def test_a_held_needle_30_mm_from_the_cameras_is_localised(monkeypatch):
     """The Task 3 start holds the needle 27-50 mm from the left eye, nearly edge-on (the
     working floor was 50 mm: every such view was refused). Scene 19 (29 mm) is answered

@@ -85,3 +85,39 @@ def test_task_sets_build_scenes_whose_priors_hold_at_the_truth():
                     assert held.slide(s.T_world_needle, sim.model, signed=True) < 0.0005
     finally:
         sim.close()
+
+
+def test_a_heldout_phantom_scene_moves_the_phantom_and_its_priors_hold_there():
+    """``--phantom heldout``: each scene's phantom is drawn within the held-out ranges, the
+    in-port scene is built on the moved ports (its priors true there), and the localiser is
+    given the moved phantom's tissue model."""
+    import heldout_phantom  # noqa: E402
+
+    from suture_bt.datagen.needle_data import SimScene  # noqa: E402
+    from suture_bt.geometry.tissue_surface import solid_pieces  # noqa: E402
+    from suture_bt.perception.needle_localizer import NeedleLocalizer  # noqa: E402
+    from suture_bt.perception.needle_prior import consistent, prior_misses  # noqa: E402
+
+    sim = SimScene(640, 480)
+    try:
+        loc = NeedleLocalizer(sim.stereo)
+        for i in range(2):
+            s, priors, pose, _ = heldout_phantom.task_scene(
+                sim, loc, "in_port", [11, 4, i], "heldout"
+            )
+            T = sim.world.task.phantom.T_world_phantom
+            assert np.hypot(*T[:2, 3]) > 1e-4 and np.all(np.abs(T[:2, 3]) <= 0.020)
+            assert np.allclose(T[:3, 3], pose["position"])
+            ports = {p.port for p in priors if type(p).__name__ == "PortPrior"}
+            for p in priors:
+                if type(p).__name__ == "PortPrior":
+                    assert np.allclose(p.point, sim.world.task.phantom.port(p.port).position)
+            assert (
+                ports and consistent(prior_misses(priors, s.T_world_needle[None], sim.model)).all()
+            )
+            assert loc.fitter.tissue_solid is loc.tissue.pieces
+            expected = solid_pieces(sim.world.task.phantom)
+            got = [pt for piece in loc.tissue.pieces for pt, _ in piece]
+            assert np.allclose(got, [pt for piece in expected for pt, _ in piece])
+    finally:
+        sim.close()

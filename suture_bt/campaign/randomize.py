@@ -178,17 +178,30 @@ def draw(config: CampaignConfig, index: int) -> dict[str, Any]:
 
 
 def _phantom_in_view(config: CampaignConfig, g: np.random.Generator, camera: Any) -> dict[str, Any]:
-    """The phantom pose jittered about the base scene's; a draw that puts a port outside
-    either image (``PORT_MARGIN_PX`` to spare) is drawn again (the tree confirms the emerged
-    tip from images: such a scene measures the camera's placement, not the tree). Within the
-    default ranges every first draw is kept."""
+    """The phantom pose jittered about the base scene's (:func:`phantom_pose_in_view`)."""
+    base = config.scene_raw.get("phantom", {})
+    p0 = base.get("position", [0.0, 0.0, 0.0])
+    r0 = base.get("rpy", [0.0, 0.0, 0.0])
+    return phantom_pose_in_view(config.randomization, g, camera, p0, r0)
+
+
+def phantom_pose_in_view(
+    rz: Randomization,
+    g: np.random.Generator,
+    camera: Any,
+    position0=(0.0, 0.0, 0.0),
+    rpy0=(0.0, 0.0, 0.0),
+) -> dict[str, Any]:
+    """A phantom pose (``{"position", "rpy"}``, a scene file's ``phantom:``) jittered within
+    ``rz``'s ranges about ``position0`` / ``rpy0``; a draw that puts a port outside either
+    image of ``camera`` (``PORT_MARGIN_PX`` to spare) is drawn again (the tree confirms the
+    emerged tip from images: such a scene measures the camera's placement, not the tree).
+    Within the default ranges every first draw is kept."""
     from suture_bt.campaign.resting_start import in_view
     from suture_bt.geometry import PhantomModel
     from suture_bt.transforms import pose_to_transform
 
-    rz, base = config.randomization, config.scene_raw.get("phantom", {})
-    p0 = base.get("position", [0.0, 0.0, 0.0])
-    r0 = base.get("rpy", [0.0, 0.0, 0.0])
+    p0, r0 = position0, rpy0
     for _ in range(PHANTOM_TRIES):
         xy = g.uniform(-1.0, 1.0, 2) * rz.phantom_xy_mm * 1e-3
         z = g.uniform(-1.0, 1.0) * rz.phantom_z_mm * 1e-3

@@ -251,6 +251,27 @@ class SimScene:
         phantom = self.world.phantom
         return under | phantom.inside_tissue(pts_world) | phantom.below_floor(pts_world)
 
+    def move_phantom(self, T_world_phantom: np.ndarray) -> None:
+        """Rebuild the phantom (tissue, ridge, port squares and floor) at ``T_world_phantom``,
+        and tell the world's known task and the sampler (benchmarks draw held-out phantom
+        poses per scene; the arms and the camera stay)."""
+        import dataclasses
+
+        import pybullet as p
+
+        from suture_bt.geometry import PhantomModel
+        from suture_bt.sim.phantom_body import PhantomBody
+
+        world = self.world
+        old = world.phantom
+        for body in (old.id, old.floor_id):
+            p.removeBody(body, physicsClientId=world.client)
+        phantom = PhantomModel(np.asarray(T_world_phantom, float).copy())
+        world.task = dataclasses.replace(world.task, phantom=phantom)
+        world.phantom = PhantomBody(world.client, phantom, world.task.needle)
+        self.sampler.T_world_phantom = phantom.T_world_phantom
+        self.sampler.ports = phantom.ports()
+
     def apply(self, s: SceneSample) -> None:
         for a in ("psm1", "psm2"):
             self.world.arms[a].body.set_joints(s.q[a], s.jaw[a])

@@ -158,19 +158,25 @@ class NeedleLocalizer:
         self.max_position_std_mm = MAX_POSITION_STD_MM
         #: An answer whose ends moved farther (px) from every end hypothesis is refit from them.
         self.refit_moved_px = REFIT_MOVED_PX
-        self.tissue = tissue
         self.max_exposed = max_exposed
-        self.fitter = PoseFitter(
-            stereo,
-            self.model,
-            depth_range=(MIN_DEPTH, MAX_DEPTH),
-            tissue_solid=getattr(tissue, "pieces", None),
-        )
+        self.fitter = PoseFitter(stereo, self.model, depth_range=(MIN_DEPTH, MAX_DEPTH))
+        self.tissue = tissue
         self.input_width = INPUT_SIZE[0]
         self.coarse_threshold = 0.3
         #: The last call's network output (coarse probabilities, scale), kept whether or not
         #: it answered: a refusal still says where in the images needle was seen.
         self.last_network: tuple[np.ndarray, float] | None = None
+
+    @property
+    def tissue(self) -> Callable[[np.ndarray], np.ndarray] | None:
+        """The caller's tissue model (see ``__init__``). Setting it (the phantom was moved)
+        also gives the fit the new model's solid."""
+        return self._tissue
+
+    @tissue.setter
+    def tissue(self, tissue: Callable[[np.ndarray], np.ndarray] | None) -> None:
+        self._tissue = tissue
+        self.fitter.tissue_solid = getattr(tissue, "pieces", None)
 
     @property
     def base_tip(self) -> BaseTipChooser:
