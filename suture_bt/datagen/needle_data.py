@@ -254,7 +254,8 @@ class SimScene:
     def move_phantom(self, T_world_phantom: np.ndarray) -> None:
         """Rebuild the phantom (tissue, ridge, port squares and floor) at ``T_world_phantom``,
         and tell the world's known task and the sampler (benchmarks draw held-out phantom
-        poses per scene; the arms and the camera stay)."""
+        poses per scene; the arms and the camera stay). A SimScene steps no physics, so the
+        world's crossing bookkeeping is left as it was."""
         import dataclasses
 
         import pybullet as p
