@@ -72,7 +72,7 @@ def probed(
             rest = probes[i:]
             results[i:] = probe_together(rest, [start] * len(rest), rays, polish, loss)
         xs, cs = results[i]
-        cs = np.where(fitter._in_range(xs), cs, np.inf)
+        cs = np.where(fitter.in_range(xs), cs, np.inf)
         if probe is rivals:
             # Rivals are the probe's poses (and the first answer, if one of them replaces
             # it): the other finals are separate basins, mostly the mirror twin, whose small
@@ -85,5 +85,5 @@ def probed(
             keep = cs < cf[b]  # a cheaper pose only
             xf, cf = np.concatenate([xf, xs[keep]]), np.concatenate([cf, cs[keep]])
             near = np.concatenate([near, np.zeros(keep.sum(), bool)])
-        b, ok, misses = choose_answer(fitter._world(xf), cf, priors, fitter.model)
+        b, ok, misses = choose_answer(fitter.world_poses(xf), cf, priors, fitter.model)
     return xf, cf, b, ok, misses, near

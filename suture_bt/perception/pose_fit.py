@@ -266,7 +266,7 @@ class PoseFitter:
         if self.n_second_stage and len(x) > self.n_second_stage:
             x = x[self._diverse(x, c1, self.n_second_stage)]
         x, c = levenberg_marquardt(x, mid, self.stereo, self.model, it2, 1.0, terms)
-        c = np.where(self._in_range(x), c, np.inf)
+        c = np.where(self.in_range(x), c, np.inf)
         if hidden_end is None:
             hidden_end = bool(alternatives)
         hidden_end = hidden_end or bool(priors)
@@ -286,7 +286,7 @@ class PoseFitter:
                 y, cy = levenberg_marquardt(st, coarse, self.stereo, self.model, it1, 3.0, terms)
                 y, cy = levenberg_marquardt(y, mid, self.stereo, self.model, it2, 1.0, terms)
                 x = np.concatenate([x, y])
-                c = np.concatenate([c, np.where(self._in_range(y), cy, np.inf)])
+                c = np.concatenate([c, np.where(self.in_range(y), cy, np.inf)])
         if not np.isfinite(c).any():
             lo, hi = self.depth_range
             raise NeedleNotFound(
@@ -302,7 +302,7 @@ class PoseFitter:
                 finals.append(k)
                 kept.append(j)
         if priors:
-            finals = with_consistent(finals, self._world(x), c, priors, self.model)
+            finals = with_consistent(finals, self.world_poses(x), c, priors, self.model)
         polish = [t for t in terms if t.polish]
         prior_term = PriorTerm(priors, cam.T_cam_world, self.model) if self.prior_polish else None
         if prior_term:
@@ -310,10 +310,10 @@ class PoseFitter:
         xf, cf = levenberg_marquardt(
             x[finals], rays, self.stereo, self.model, it3, 1.0, polish, self.final_loss
         )
-        cf = np.where(self._in_range(xf), cf, np.inf)
+        cf = np.where(self.in_range(xf), cf, np.inf)
         if not np.isfinite(cf).any():
             raise NeedleNotFound("pose fit diverged")
-        b, ok, misses = choose_answer(self._world(xf), cf, priors, self.model)
+        b, ok, misses = choose_answer(self.world_poses(xf), cf, priors, self.model)
         amb = float(np.min(np.delete(cf, b)) - cf[b]) if len(cf) > 1 else float("inf")
         xf, cf, b, ok, misses, near = probed(
             self, xf, cf, (b, ok, misses), FitRays(rays, coarse, mid), polish, priors, hidden_end
@@ -357,7 +357,7 @@ class PoseFitter:
         depths = [0.0] * (len(pieces) - len(solid)) + [self.solid_depth] * len(solid)
         return TissueCut.from_pieces(pieces, self.stereo.left.T_cam_world, self.model, depths)
 
-    def _world(self, x: np.ndarray) -> np.ndarray:
+    def world_poses(self, x: np.ndarray) -> np.ndarray:
         """World poses (K, 4, 4) of parameter rows (priors are in the world frame)."""
         cam = self.stereo.left
         return cam.T_world_cam[None] @ params_to_pose(x, cam, self.model)
@@ -366,7 +366,7 @@ class PoseFitter:
         """:func:`~.fit_starts.diverse` with this fitter's camera and model."""
         return diverse(x, cost, n, self.stereo.left, self.model)
 
-    def _in_range(self, x: np.ndarray) -> np.ndarray:
+    def in_range(self, x: np.ndarray) -> np.ndarray:
         """Which parameter rows put the arc centre within ``depth_range`` of the camera."""
         z = params_to_pose(x, self.stereo.left, self.model)[:, 2, 3]
         return (z >= self.depth_range[0]) & (z <= self.depth_range[1])
