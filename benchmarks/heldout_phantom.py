@@ -27,14 +27,17 @@ PHANTOM_STREAM = 97
 PHANTOM_REDRAWS = 10
 
 
-def move_phantom(sim: SimScene, loc: NeedleLocalizer, stream: list[int]) -> dict:
-    """Draw a held-out phantom pose from ``stream``, rebuild the phantom there and give the
-    localiser its tissue model; the pose (a scene file's ``phantom:``)."""
-    g = np.random.default_rng(stream)
-    pose = phantom_pose_in_view(HELDOUT_PHANTOM, g, sim.stereo)
+def move_phantom(sim: SimScene, stream: list[int]) -> dict:
+    """Draw a held-out phantom pose from ``stream`` and rebuild the phantom there; the pose (a
+    scene file's ``phantom:``)."""
+    pose = phantom_pose_in_view(HELDOUT_PHANTOM, np.random.default_rng(stream), sim.stereo)
     sim.move_phantom(pose_to_transform(pose["position"], pose["rpy"]))
-    loc.tissue = phantom_tissue(sim.world.task.phantom, sim.stereo.left.T_world_cam[:3, 3])
     return pose
+
+
+def tell_localizer(sim: SimScene, loc: NeedleLocalizer) -> None:
+    """Give the localiser the tissue model of the phantom as it now stands."""
+    loc.tissue = phantom_tissue(sim.world.task.phantom, sim.stereo.left.T_world_cam[:3, 3])
 
 
 def task_scene(sim: SimScene, loc: NeedleLocalizer, cond: str, stream: list[int], phantom: str):
@@ -42,18 +45,20 @@ def task_scene(sim: SimScene, loc: NeedleLocalizer, cond: str, stream: list[int]
     phantom) and the scene's random generator (drawn from ``stream``; rendering goes on with
     it). A held-out phantom pose where the set's builder finds no reachable scene (its ports
     out of an arm's reach) is drawn again, up to PHANTOM_REDRAWS times, the scene's draws
-    starting over."""
+    starting over; the localiser is told the pose that was kept."""
     build = needle_task_scenes.BUILDERS[cond]
     if phantom != "heldout":
         rng = np.random.default_rng(stream)
         return (*build(sim, rng), None, rng)
     for k in range(PHANTOM_REDRAWS):
-        pose = move_phantom(sim, loc, [*stream, PHANTOM_STREAM, k])
+        pose = move_phantom(sim, [*stream, PHANTOM_STREAM, k])
         rng = np.random.default_rng(stream)
         try:
-            return (*build(sim, rng), pose, rng)
+            scene, priors = build(sim, rng)
         except RuntimeError:
             continue
+        tell_localizer(sim, loc)
+        return scene, priors, pose, rng
     raise RuntimeError(
         f"no reachable {cond} scene on {PHANTOM_REDRAWS} phantom poses (scene {stream[-1]})"
     )

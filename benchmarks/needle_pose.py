@@ -49,7 +49,7 @@ import time
 import needle_task_scenes
 import numpy as np
 import torch
-from heldout_phantom import PHANTOM_STREAM, move_phantom, task_scene
+from heldout_phantom import PHANTOM_STREAM, move_phantom, task_scene, tell_localizer
 from scipy.spatial.transform import Rotation
 from tqdm import tqdm
 
@@ -368,7 +368,6 @@ def run(
             rows: dict[str, list] = {m: [] for m in modes}
             bar = tqdm(range(n), desc=f"{cond} {width}x{height}")
             for i in bar:
-                rng = np.random.default_rng([seed, ci, i])
                 pose = None
                 if task:
                     s, task_priors, pose, rng = task_scene(sim, loc, cond, [seed, ci, i], phantom)
@@ -377,7 +376,9 @@ def run(
                     frac, draws = _visible_fraction(sim, s, mask), 1
                 else:
                     if phantom == "heldout":
-                        pose = move_phantom(sim, loc, [seed, ci, i, PHANTOM_STREAM])
+                        pose = move_phantom(sim, [seed, ci, i, PHANTOM_STREAM])
+                        tell_localizer(sim, loc)
+                    rng = np.random.default_rng([seed, ci, i])
                     s, left, frac, draws = _draw_scene(sim, cond, rng, i)
                 right, _ = sim.render("right", s, rng)
                 T_true = invert(sim.stereo.left.T_world_cam) @ s.T_world_needle

@@ -544,3 +544,9 @@ class PhantomBody:
         self._last_tip = None
         self._last_t = None
         self._open_exit.clear()
+
+    def remove(self) -> None:
+        """Take the phantom's bodies (tissue with its ridge and port squares, and the floor) out
+        of the client, e.g. before building it again at another pose."""
+        for body in (self.id, self.floor_id):
+            p.removeBody(body, physicsClientId=self.client)

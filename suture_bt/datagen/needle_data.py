@@ -258,15 +258,11 @@ class SimScene:
         world's crossing bookkeeping is left as it was."""
         import dataclasses
 
-        import pybullet as p
-
         from suture_bt.geometry import PhantomModel
         from suture_bt.sim.phantom_body import PhantomBody
 
         world = self.world
-        old = world.phantom
-        for body in (old.id, old.floor_id):
-            p.removeBody(body, physicsClientId=world.client)
+        world.phantom.remove()
         phantom = PhantomModel(np.asarray(T_world_phantom, float).copy())
         world.task = dataclasses.replace(world.task, phantom=phantom)
         world.phantom = PhantomBody(world.client, phantom, world.task.needle)
