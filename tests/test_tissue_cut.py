@@ -139,3 +139,32 @@ def test_a_piece_hides_only_a_stretch_of_arc_that_reaches_its_depth():
     assert np.isnan(spans(0.0005, 0.001)).all()
     assert np.isfinite(spans(0.0005, 0.0)[0]).all()
     assert np.isfinite(spans(0.0025, 0.001)[0]).all()
+
+
+def test_span_derivatives_are_those_of_the_plane_roots_and_an_arc_end_does_not_move():
+    """The analytic derivatives of the span ends agree with finite differences of the spans
+    over small turns and shifts of the pose; the end at the arc's base stays put."""
+    crossing = np.radians(100.0)
+    tilted = np.array([0.3, -0.2, 1.0]) / np.linalg.norm([0.3, -0.2, 1.0])
+    point, _ = _plane_at(crossing, towards_tip=True)
+    cut = TissueCut.from_ports([(point, -_tangent(crossing) + 0.3 * tilted)], np.eye(4), MODEL)
+    steps = np.array([1e-6, 1e-6, 1e-6, 1e-5, 1e-5, 1e-5])
+    moves = []
+    for i, h in enumerate(steps):
+        d = np.zeros(6)
+        d[i] = h
+        R = make_transform(_small_rotation(d[3:]), d[:3])
+        moves.append(T0 @ R)
+    T6 = np.array(moves)[None]
+    spans, deriv = cut.spans_and_derivatives(T0[None], T6, steps)
+    fd = (cut.spans(T6[0]) - spans[0][None]) / steps[:, None, None]
+    assert np.isfinite(spans[0, 0]).all() and spans[0, 0, 1] == HI
+    np.testing.assert_allclose(deriv[0, :, 0, 0], fd[:, 0, 0], rtol=1e-3, atol=1e-3)
+    assert np.all(deriv[0, :, 0, 1] == 0.0)  # the base end of the arc
+    assert np.abs(deriv[0, :, 0, 0]).max() > 1.0  # the cut's end does move
+
+
+def _small_rotation(w: np.ndarray) -> np.ndarray:
+    from scipy.spatial.transform import Rotation
+
+    return Rotation.from_rotvec(w).as_matrix()

@@ -95,23 +95,26 @@ class TissueCut:
         """Hidden spans (K, MAX_SPANS, 2) of arc angle per pose (K, 4, 4; NaN rows: none),
         each end that meets the seen arc set back by the wire's radius."""
         T = np.ascontiguousarray(np.asarray(T, dtype=np.float64).reshape(-1, 4, 4))
-        return hidden_spans(T, self.points, self.normals, *self._args)
+        return hidden_spans(T, self.points, self.normals, *self._args)[0]
 
     def spans_and_derivatives(self, T: np.ndarray, T6: np.ndarray, steps) -> tuple:
-        """The spans at T (K, 4, 4) and their forward differences (K, 6, MAX_SPANS, 2) in the
-        six parameters, from the poses T6 (K, 6, 4, 4) stepped by ``steps`` (0 where a span
-        appears or goes). Only the poses with a span at T are stepped: a difference from no
-        span is 0 anyway (most poses have none)."""
-        T = np.reshape(T, (-1, 4, 4))
+        """The spans at T (K, 4, 4) and their derivatives (K, 6, MAX_SPANS, 2) in the six
+        parameters, from the poses T6 (K, 6, 4, 4) stepped by ``steps``: each end's plane
+        root differentiated along the pose's forward differences (:func:`span_derivatives`;
+        0 for an end of the arc). Only the poses with a span at T are differentiated (most
+        poses have none)."""
+        T = np.ascontiguousarray(np.asarray(T, dtype=np.float64).reshape(-1, 4, 4))
         K = len(T)
-        s0 = self.spans(T)
+        s0, planes = hidden_spans(T, self.points, self.normals, *self._args)
         d = np.zeros((K, 6, MAX_SPANS, 2))
         cut = np.isfinite(s0).any(axis=(1, 2))
         if cut.any():
-            s6 = self.spans(np.reshape(T6, (K, 6, 4, 4))[cut].reshape(-1, 4, 4))
-            s6 = s6.reshape(-1, 6, MAX_SPANS, 2)
-            dk = (s6 - s0[cut][:, None]) / np.asarray(steps, float)[None, :, None, None]
-            d[cut] = np.where(np.isfinite(dk), dk, 0.0)
+            T6c = np.reshape(T6, (K, 6, 4, 4))[cut]
+            dT = (T6c - T[cut][:, None]) / np.asarray(steps, float)[None, :, None, None]
+            shift = self.model.wire_radius / self.model.radius
+            d[cut] = span_derivatives(
+                s0[cut], planes[cut], T[cut], dT, self.normals, self.model.radius, shift
+            )
         return s0, d
 
 
@@ -153,8 +156,8 @@ def _sample(A, B, C, G, act, D, c, s):
 def _boundary(A, B, C, G, act, D, u, v):
     """Where 'inside a piece' changes within [u, v]: among the roots there of the planes of
     the pieces the circle reaches, the one where the tissue height (:func:`_sample`) is
-    nearest zero."""
-    best, arg = np.inf, 0.5 * (u + v)
+    nearest zero; and that plane (-1: none, the span's middle)."""
+    best, arg, plane = np.inf, 0.5 * (u + v), -1
     for g in range(G.shape[0] - 1):
         if not act[g]:
             continue
@@ -164,8 +167,8 @@ def _boundary(A, B, C, G, act, D, u, v):
                 continue
             h = _sample(A, B, C, G, act, D, math.cos(th), math.sin(th))[0]
             if abs(h) < best:
-                best, arg = abs(h), th
-    return arg
+                best, arg, plane = abs(h), th, q
+    return arg, plane
 
 
 @njit(cache=True, parallel=True)
@@ -174,9 +177,11 @@ def hidden_spans(T, P, N, G, D, rad, lo, hi, shift, grid):
     pieces: plane offsets G, depths D) for poses T (K, 4, 4): found on ``grid`` (angles
     lo..hi), kept where a sample reaches a piece's depth, their ends solved exactly, those
     meeting the seen arc set back by ``shift`` (rad) into it. NaN rows: no span. A piece
-    with a plane the pose's whole circle lies outside of is skipped (most poses: all)."""
+    with a plane the pose's whole circle lies outside of is skipped (most poses: all).
+    Also the plane each end lies on (K, 2, 2; -1: an end of the arc, which does not move)."""
     K, Q, S, NG = T.shape[0], P.shape[0], grid.shape[0], G.shape[0] - 1
     out = np.full((K, 2, 2), np.nan)
+    planes = np.full((K, 2, 2), -1, np.int64)
     gc, gs = np.cos(grid), np.sin(grid)
     for k in prange(K):  # poses are independent: the same bits on any number of threads
         A, B, C = np.empty(Q), np.empty(Q), np.empty(Q)
@@ -198,28 +203,68 @@ def hidden_spans(T, P, N, G, D, rad, lo, hi, shift, grid):
             any_act = any_act or act[g]
         if not any_act:
             continue
-        n, prev, start, deep = 0, False, lo, False
+        n, prev, start, start_plane, deep = 0, False, lo, -1, False
         for i in range(S):
             h, deep_here = _sample(A, B, C, G, act, D, gc[i], gs[i])
             hid = h < 0.0
             if hid and not prev:
-                start = lo if i == 0 else _boundary(A, B, C, G, act, D, grid[i - 1], grid[i])
+                start, start_plane = lo, -1
+                if i > 0:
+                    start, start_plane = _boundary(A, B, C, G, act, D, grid[i - 1], grid[i])
                 deep = False
             if hid:
                 deep = deep or deep_here
             if prev and not hid and n < 2 and deep:
-                out[k, n, 0] = start
-                out[k, n, 1] = _boundary(A, B, C, G, act, D, grid[i - 1], grid[i])
+                out[k, n, 0], planes[k, n, 0] = start, start_plane
+                out[k, n, 1], planes[k, n, 1] = _boundary(A, B, C, G, act, D, grid[i - 1], grid[i])
                 n += 1
             prev = hid
         if prev and n < 2 and deep:
             out[k, n, 0], out[k, n, 1] = start, hi
+            planes[k, n, 0] = start_plane
             n += 1
         for j in range(n):  # the cut's rounded end reaches the plane
             if out[k, j, 0] > lo:
                 out[k, j, 0] = max(out[k, j, 0] - shift, lo)
             if out[k, j, 1] < hi:
                 out[k, j, 1] = min(out[k, j, 1] + shift, hi)
+            for e in range(2):  # an end clamped to the arc's end no longer moves
+                if out[k, j, e] <= lo or out[k, j, e] >= hi:
+                    planes[k, j, e] = -1
+    return out, planes
+
+
+@njit(cache=True)
+def span_derivatives(spans, planes, T, dT, N, rad, shift):
+    """d(span ends)/d(parameter) (K, 6, 2, 2) from the poses' derivatives dT (K, 6, 4, 4):
+    an end on plane q (set back by ``shift`` from the root, as :func:`hidden_spans` does) is a
+    root of A cos θ + B sin θ + C = 0 (A, B, C linear in the pose), so
+    dθ = -(dA cos θ + dB sin θ + dC) / (B cos θ - A sin θ); an end of the arc does not move
+    (0), nor does one where the root is tangent (0: it appears or goes there)."""
+    K = spans.shape[0]
+    out = np.zeros((K, 6, 2, 2))
+    for k in range(K):
+        for j in range(2):
+            for e in range(2):
+                q = planes[k, j, e]
+                if q < 0:
+                    continue
+                th = spans[k, j, e] + (shift if e == 0 else -shift)
+                c, s = math.cos(th), math.sin(th)
+                a = b = 0.0
+                for m in range(3):
+                    a += N[q, m] * T[k, m, 0]
+                    b += N[q, m] * T[k, m, 1]
+                den = rad * (b * c - a * s)
+                if abs(den) < 1e-12:
+                    continue
+                for i in range(6):
+                    da = db = dc = 0.0
+                    for m in range(3):
+                        da += N[q, m] * dT[k, i, m, 0]
+                        db += N[q, m] * dT[k, i, m, 1]
+                        dc += N[q, m] * dT[k, i, m, 3]
+                    out[k, i, j, e] = -(rad * (da * c + db * s) + dc) / den
     return out
 
 
