@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import numpy as np
+from numba import njit
 
 from suture_bt.geometry import NeedleModel
 from suture_bt.interfaces import StereoCameraModel
@@ -14,7 +15,6 @@ from suture_bt.perception.prior_term import PriorTerm, prior_information
 #: Finite-difference steps of the six parameters (px, px, px, px, rad, rad) for the pose's
 #: derivatives and the extra terms' (the edge residuals' derivatives are analytic).
 FD_STEPS = np.array([0.02, 0.02, 0.02, 0.02, 2e-5, 2e-4])
-_DIAG = np.arange(len(FD_STEPS))
 #: No step, then FD_STEPS in each parameter in turn (rows of a pose and its stepped poses).
 _STEPS = np.concatenate([np.zeros((1, 6)), np.diag(FD_STEPS)])
 
@@ -40,6 +40,49 @@ def robust_cost(
     c = 0.5 * sigma**2 * (np.log1p(x2) if loss == "cauchy" else x2 / (1.0 + x2))
     out = c.mean(-1) if weights is None else (c * weights).sum(-1) / weights.sum()
     return np.where(np.isfinite(out), out, np.inf)
+
+
+@njit(cache=True)
+def damped_steps(A: np.ndarray, g: np.ndarray, lam: np.ndarray) -> np.ndarray:
+    """Levenberg-Marquardt steps -(A + λ (diag A + 1e-9))⁻¹ g per row (K, 6, 6), (K, 6), (K,),
+    by Cholesky (A is a Gauss-Newton matrix, so the damped one is positive definite); NaN
+    where it is not (the trial then costs inf and the row's damping grows)."""
+    K, n = g.shape
+    out = np.empty((K, n))
+    L = np.empty((n, n))
+    y = np.empty(n)
+    for k in range(K):
+        ok = True
+        for i in range(n):
+            for j in range(i + 1):
+                v = A[k, i, j]
+                if i == j:
+                    v += lam[k] * (A[k, i, i] + 1e-9)
+                for m in range(j):
+                    v -= L[i, m] * L[j, m]
+                if i == j:
+                    if not v > 0.0:
+                        ok = False
+                        break
+                    L[i, i] = np.sqrt(v)
+                else:
+                    L[i, j] = v / L[j, j]
+            if not ok:
+                break
+        if not ok:
+            out[k] = np.nan
+            continue
+        for i in range(n):  # L y = -g
+            v = -g[k, i]
+            for m in range(i):
+                v -= L[i, m] * y[m]
+            y[i] = v / L[i, i]
+        for i in range(n - 1, -1, -1):  # Lᵀ x = y
+            v = y[i]
+            for m in range(i + 1, n):
+                v -= L[m, i] * out[k, m]
+            out[k, i] = v / L[i, i]
+    return out
 
 
 def _pose_derivatives(x: np.ndarray, T: np.ndarray, cam, model: NeedleModel):
@@ -115,14 +158,7 @@ def levenberg_marquardt(
             Jw = J * w[:, None, :]
             A = A + Jw @ J.transpose(0, 2, 1)
             g = g + (Jw @ rx[..., None])[..., 0]
-        diag = np.einsum("kii->ki", A) + 1e-9
-        Ad = A + 0.0
-        Ad[:, _DIAG, _DIAG] += lam[:, None] * diag
-        try:
-            delta = -np.linalg.solve(Ad, g[..., None])[..., 0]
-        except np.linalg.LinAlgError:
-            break
-        xn = x + delta
+        xn = x + damped_steps(A, g, lam)
         last = it == iters - 1  # its trial's residuals decide; its derivatives are unused
         Tn, T6n, E6n = with_steps(xn, stepped=not last)
         rn, thn, csn, An, gn = evaluate(Tn, T6n, theta, cs)
