@@ -189,19 +189,18 @@ def phantom_pose_in_view(
     rz: Randomization,
     g: np.random.Generator,
     camera: Any,
-    position0=(0.0, 0.0, 0.0),
-    rpy0=(0.0, 0.0, 0.0),
+    p0=(0.0, 0.0, 0.0),
+    r0=(0.0, 0.0, 0.0),
 ) -> dict[str, Any]:
     """A phantom pose (``{"position", "rpy"}``, a scene file's ``phantom:``) jittered within
-    ``rz``'s ranges about ``position0`` / ``rpy0``; a draw that puts a port outside either
-    image of ``camera`` (``PORT_MARGIN_PX`` to spare) is drawn again (the tree confirms the
-    emerged tip from images: such a scene measures the camera's placement, not the tree).
-    Within the default ranges every first draw is kept."""
+    ``rz``'s ranges about the position ``p0`` and the RPY ``r0``; a draw that puts a port
+    outside either image of ``camera`` (``PORT_MARGIN_PX`` to spare) is drawn again (the tree
+    confirms the emerged tip from images: such a scene measures the camera's placement, not
+    the tree). Within the default ranges every first draw is kept."""
     from suture_bt.campaign.resting_start import in_view
     from suture_bt.geometry import PhantomModel
     from suture_bt.transforms import pose_to_transform
 
-    p0, r0 = position0, rpy0
     for _ in range(PHANTOM_TRIES):
         xy = g.uniform(-1.0, 1.0, 2) * rz.phantom_xy_mm * 1e-3
         z = g.uniform(-1.0, 1.0) * rz.phantom_z_mm * 1e-3

@@ -16,7 +16,7 @@ from __future__ import annotations
 
 import json
 import time
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from pathlib import Path
 
 import cv2
@@ -256,15 +256,13 @@ class SimScene:
         and tell the world's known task and the sampler (benchmarks draw held-out phantom
         poses per scene; the arms and the camera stay). A SimScene steps no physics, so the
         world's crossing bookkeeping is left as it was."""
-        import dataclasses
-
         from suture_bt.geometry import PhantomModel
         from suture_bt.sim.phantom_body import PhantomBody
 
         world = self.world
         world.phantom.remove()
         phantom = PhantomModel(np.asarray(T_world_phantom, float).copy())
-        world.task = dataclasses.replace(world.task, phantom=phantom)
+        world.task = replace(world.task, phantom=phantom)
         world.phantom = PhantomBody(world.client, phantom, world.task.needle)
         self.sampler.T_world_phantom = phantom.T_world_phantom
         self.sampler.ports = phantom.ports()

@@ -90,6 +90,7 @@ class TissueCut:
         object.__setattr__(self, "depths", depths)
         args = (groups, depths, m.radius, m.tip_angle, m.base_angle, shift, grid)
         object.__setattr__(self, "_args", args)
+        object.__setattr__(self, "_shift", shift)
 
     def spans(self, T: np.ndarray) -> np.ndarray:
         """Hidden spans (K, MAX_SPANS, 2) of arc angle per pose (K, 4, 4; NaN rows: none),
@@ -111,9 +112,8 @@ class TissueCut:
         if cut.any():
             T6c = np.reshape(T6, (K, 6, 4, 4))[cut]
             dT = (T6c - T[cut][:, None]) / np.asarray(steps, float)[None, :, None, None]
-            shift = self.model.wire_radius / self.model.radius
             d[cut] = span_derivatives(
-                s0[cut], planes[cut], T[cut], dT, self.normals, self.model.radius, shift
+                s0[cut], planes[cut], T[cut], dT, self.normals, self.model.radius, self._shift
             )
         return s0, d
 
