@@ -31,10 +31,16 @@ offset; the benchmark gives the calibrated pinch point, as the tree localises af
 calibrating); in a port also the entry and exit ports (3 mm) and where along the needle the
 jaw holds it (the grasp the tree made there, within the sensor's ``HELD_PLACE_TOL``; the
 scene's jaw holds it off that place by a draw of ``HELD_PLACE_SPREAD``).
+
+Since session 30 the points of those priors carry the errors measured where the tree gets
+them (:func:`with_measured_errors`, drawn from their own random stream so the scenes stay the
+same): a calibrated pinch point is off by the calibration's residual, and a port by how far
+from it the tree's throws cross. Before, both were exact, which flattered the priors.
 """
 
 from __future__ import annotations
 
+from dataclasses import replace
 from itertools import islice
 from types import SimpleNamespace
 
@@ -78,6 +84,34 @@ PORT_TOL = 0.003
 HELD_PLACE_SPREAD = 0.0002
 JAW_CLOSED = 0.0
 JAW_OPEN = 0.8
+#: Error (m, per axis, normal) of a calibrated arm's pinch point: the calibration benchmark's
+#: tip error after compensation (README, "Joint-offset calibration": 0.15 mm mean, 0.35 mm
+#: p95 over 8 ports × 200 offsets); 0.12 mm per axis gives 0.19 mm mean, 0.34 mm p95.
+PINCH_ERROR_STD = 0.00012
+#: Error (m, per axis in the port's plane, normal) of where the wire crosses a port: the
+#: lateral error of the tree's crossings in the held-out campaign of session 29
+#: (docs/eval/heldout_s29_summary.md: entries 0.18 mm mean, 0.36 mm p95).
+PORT_ERROR_STD = 0.00015
+
+
+def with_measured_errors(priors: list, rng: np.random.Generator) -> list:
+    """``priors`` with each held-by pinch point and port point moved by the error the tree's
+    own would carry (PINCH_ERROR_STD in 3-D, PORT_ERROR_STD within the port's plane); the
+    other priors as they are."""
+    out = []
+    for p in priors:
+        if isinstance(p, HeldPrior):
+            p = replace(
+                p, pinch_point=np.asarray(p.pinch_point) + rng.normal(0, PINCH_ERROR_STD, 3)
+            )
+        elif isinstance(p, PortPrior):
+            v = rng.normal(0.0, PORT_ERROR_STD, 3)
+            if p.normal is not None:
+                n = np.asarray(p.normal, float) / np.linalg.norm(p.normal)
+                v -= n * (v @ n)
+            p = replace(p, point=np.asarray(p.point) + v)
+        out.append(p)
+    return out
 
 
 def _other(arm: str) -> str:

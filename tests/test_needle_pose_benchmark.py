@@ -87,6 +87,41 @@ def test_task_sets_build_scenes_whose_priors_hold_at_the_truth():
         sim.close()
 
 
+def test_measured_prior_errors_move_pinch_points_in_3d_and_ports_in_their_plane():
+    """The benchmark's task priors carry the errors measured where the tree gets them: a
+    pinch point moves by the calibration's residual in 3-D, a port point within its own plane
+    (its normal part unchanged) by the tree's crossing error; the other priors and every
+    tolerance stay as they were, and the same stream draws the same errors."""
+    import needle_task_scenes as nts  # noqa: E402
+
+    from suture_bt.perception.needle_prior import (  # noqa: E402
+        AcrossJawsPrior,
+        HeldPrior,
+        PortPrior,
+    )
+
+    normal = np.array([0.0, 0.6, 0.8])
+    priors = [
+        HeldPrior("psm2", np.zeros(3), 0.001, arc_angle=1.0),
+        AcrossJawsPrior("psm2", np.array([0.0, 0.0, 1.0]), 30.0),
+        PortPrior("entry1", np.ones(3), 0.003, normal),
+    ]
+    pinch, port = [], []
+    for k in range(400):
+        held, jaws, p = nts.with_measured_errors(priors, np.random.default_rng([5, k]))
+        assert jaws is priors[1] and held.tolerance == 0.001 and held.arc_angle == 1.0
+        assert p.tolerance == 0.003 and np.allclose(p.normal, normal)
+        assert abs((p.point - 1.0) @ normal) < 1e-12
+        pinch.append(held.pinch_point)
+        port.append(p.point - 1.0)
+    assert np.isclose(np.std(pinch), nts.PINCH_ERROR_STD, rtol=0.1)
+    assert np.isclose(
+        np.sqrt(np.mean(np.sum(np.square(port), 1)) / 2), nts.PORT_ERROR_STD, rtol=0.1
+    )
+    again = nts.with_measured_errors(priors, np.random.default_rng([5, 399]))
+    assert np.array_equal(again[0].pinch_point, pinch[-1])
+
+
 def test_a_heldout_phantom_scene_moves_the_phantom_and_its_priors_hold_there():
     """``--phantom heldout``: each scene's phantom is drawn within the held-out ranges, the
     in-port scene is built on the moved ports (its priors true there), and the localiser is
