@@ -53,6 +53,7 @@ import needle_task_scenes
 import numpy as np
 import torch
 from heldout_phantom import PHANTOM_STREAM, move_phantom, task_scene, tell_localizer
+from needle_summary import summary
 from needle_task_scenes import with_measured_errors
 from scipy.spatial.transform import Rotation
 from tqdm import tqdm
@@ -163,126 +164,6 @@ def _errors(T_est: np.ndarray, T_true: np.ndarray) -> tuple[float, float, float]
         b = T_true[:3, :3] @ p + T_true[:3, 3]
         task1 += float(np.linalg.norm(a - b) * 1e3)
     return pos, ang, task1
-
-
-def _reason_kind(reason: str) -> str:
-    """A NeedleNotFound reason without its numbers, for counting refusals by kind."""
-    for kind in (
-        "misses the needle's outline",
-        "the mask holds something else",
-        "too few needle-coloured pixels",
-        "sees no needle",
-        "mm from the camera",
-        "every start failed",
-        "too few needle edge points",
-        "which end is the base cannot be told",
-        "the seen part leaves the pose loose",
-        "the swage band starts",
-        "hidden by nothing",
-        "no fitted pose",
-        "ends disagree with",
-    ):
-        if kind in reason:
-            return kind
-    return reason
-
-
-def _group_figures(sub: list[dict]) -> dict:
-    """Scenes, success rate and mean errors (over estimates) of a group of scenes."""
-    est = [r for r in sub if r["found"]]
-    return {
-        "scenes": len(sub),
-        "not_found": len(sub) - len(est),
-        "success_rate": float(
-            np.mean([r["found"] and r["pos_mm"] < 2.0 and r["ang_deg"] < 5.0 for r in sub])
-        ),
-        "mean_pos_err_mm": float(np.mean([r["pos_mm"] for r in est])) if est else None,
-        "mean_ang_err_deg": float(np.mean([r["ang_deg"] for r in est])) if est else None,
-    }
-
-
-def _by_scenario(rows: list[dict]) -> dict:
-    """Figures per scenario (resting, held, in a port, ...)."""
-    keys = sorted({r["scenario"] for r in rows})
-    return {k: _group_figures([r for r in rows if r["scenario"] == k]) for k in keys}
-
-
-#: Bins of the needle's visible share in the left image for the per-visibility figures.
-VISIBLE_BINS = ((0.0, 0.6), (0.6, 0.8), (0.8, 0.97), (0.97, 1.01))
-
-
-def _by_visible_share(rows: list[dict]) -> dict:
-    """Figures per bin of the needle's visible share ("0.60-0.80"), empty bins left out:
-    how accuracy falls as more of the needle is hidden."""
-    out = {}
-    for lo, hi in VISIBLE_BINS:
-        sub = [r for r in rows if lo <= r["visible"] < hi]
-        if sub:
-            out[f"{lo:.2f}-{min(hi, 1.0):.2f}"] = _group_figures(sub)
-    return out
-
-
-def _summary(rows: list[dict]) -> dict:
-    est = [r for r in rows if r["found"]]
-    reasons: dict[str, int] = {}
-    for r in rows:
-        if not r["found"]:
-            key = _reason_kind(r["reason"])
-            reasons[key] = reasons.get(key, 0) + 1
-    out = {"scenes": len(rows), "not_found": len(rows) - len(est), "not_found_reasons": reasons}
-    wrong = [r for r in est if r["pos_mm"] >= 2.0 or r["ang_deg"] >= 5.0]
-    out |= {"wrong": len(wrong), "wrong_rate": len(wrong) / max(len(rows), 1)}
-    out["wrong_by_scenario"] = {
-        k: sum(r["scenario"] == k for r in wrong) for k in sorted({r["scenario"] for r in wrong})
-    }
-    walls = [r["wall_ms"] for r in rows if "wall_ms" in r]
-    if walls:
-        out["wall_ms_p95"] = float(np.percentile(walls, 95))
-    out["prior_refusals"] = sum(
-        1 for r in rows if not r["found"] and "no fitted pose" in r.get("reason", "")
-    )
-    if not est:
-        return out | {"success_rate": 0.0}
-    pos = np.array([r["pos_mm"] for r in est])
-    ang = np.array([r["ang_deg"] for r in est])
-    sym = np.array([r["ang_sym_deg"] for r in est])
-    t1 = np.array([r["task1_mm"] for r in est])
-    ok = [r["found"] and r["pos_mm"] < 2.0 and r["ang_deg"] < 5.0 for r in rows]
-    ok_sym = [r["found"] and r["pos_mm"] < 2.0 and r["ang_sym_deg"] < 5.0 for r in rows]
-    t = {
-        k: np.array([r["ms"][k] for r in est])
-        for k in ("network", "refine", "fit", "ends", "total")
-    }
-    return out | {
-        "mean_pos_err_mm": float(pos.mean()),
-        "median_pos_err_mm": float(np.median(pos)),
-        "p95_pos_err_mm": float(np.percentile(pos, 95)),
-        "mean_ang_err_deg": float(ang.mean()),
-        "p95_ang_err_deg": float(np.percentile(ang, 95)),
-        "task1_score_mm": float(t1.mean()),
-        "success_rate": float(np.mean(ok)),
-        "base_tip_swapped": int(np.sum((ang > 90) & (sym < 10))),
-        "ends_decided_by": {
-            k: sum(r["end_decided_by"] == k for r in est) for k in ("colour", "previous")
-        },
-        "scenarios": {
-            k: n
-            for k in sorted({r["scenario"] for r in rows})
-            if (n := sum(r["scenario"] == k for r in rows))
-        },
-        "by_scenario": _by_scenario(rows),
-        "by_visible_share": _by_visible_share(rows),
-        "mean_ang_err_mod_swap_deg": float(sym.mean()),
-        "success_rate_mod_swap": float(np.mean(ok_sym)),
-        "depth_mm_range": [
-            float(min(r["depth_mm"] for r in est)),
-            float(max(r["depth_mm"] for r in est)),
-        ],
-        "ms_per_stereo_frame": {k: float(v.mean()) for k, v in t.items()}
-        | {"total_p95": float(np.percentile(t["total"], 95))},
-        # Per stage p95 (the tail a caller waits for is mostly the fit's).
-        "ms_per_stereo_frame_p95": {k: float(np.percentile(v, 95)) for k, v in t.items()},
-    }
 
 
 def _localize_row(loc, left, right, T_true, priors) -> dict:
@@ -409,7 +290,7 @@ def run(
                     )
             for m in modes:
                 key = f"{cond}+prior" if task and m == "task" else cond
-                results[key] = _summary(rows[m]) | {"per_scene": rows[m]}
+                results[key] = summary(rows[m]) | {"per_scene": rows[m]}
     finally:
         sim.close()
     return results

@@ -18,36 +18,6 @@ def test_errors_position_angle_and_task1():
     assert np.isclose(pos, 1.0) and np.isclose(ang, 0.0) and np.isclose(task1, 3.0)
 
 
-def test_summary_counts_refusals_as_failures_and_by_kind():
-    ms = {"network": 1.0, "refine": 1.0, "fit": 1.0, "ends": 1.0, "total": 4.0}
-    good = {
-        "found": True,
-        "pos_mm": 0.1,
-        "ang_deg": 0.5,
-        "ang_sym_deg": 0.5,
-        "task1_mm": 0.3,
-        "scenario": "free",
-        "visible": 0.85,
-        "depth_mm": 100.0,
-        "end_decided_by": "colour",
-        "ms": ms,
-    }
-    refused = {
-        "found": False,
-        "scenario": "held_psm1",
-        "visible": 0.5,
-        "reason": "the best pose misses the needle's outline by 0.9 px",
-    }
-    s = needle_pose._summary([good, refused])
-    assert s["success_rate"] == 0.5 and s["not_found"] == 1
-    assert s["not_found_reasons"] == {"misses the needle's outline": 1}
-    assert np.isclose(s["mean_pos_err_mm"], 0.1)
-    by_vis = s["by_visible_share"]
-    assert set(by_vis) == {"0.00-0.60", "0.80-0.97"}
-    assert by_vis["0.00-0.60"]["success_rate"] == 0.0 and by_vis["0.00-0.60"]["not_found"] == 1
-    assert by_vis["0.80-0.97"]["success_rate"] == 1.0
-
-
 def test_tiny_run_localizes_an_unoccluded_scene_at_1080p():
     res = needle_pose.run(1, 1920, 1080, needle_pose.HELD_OUT_SEED, None, 1, ("unoccluded",))
     row = res["unoccluded"]["per_scene"][0]

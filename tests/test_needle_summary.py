@@ -1,0 +1,39 @@
+"""The needle benchmark's set figures: refusals count as failures and are counted by kind."""
+
+import sys
+from pathlib import Path
+
+import numpy as np
+
+sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "benchmarks"))
+import needle_summary  # noqa: E402
+
+
+def test_summary_counts_refusals_as_failures_and_by_kind():
+    ms = {"network": 1.0, "refine": 1.0, "fit": 1.0, "ends": 1.0, "total": 4.0}
+    good = {
+        "found": True,
+        "pos_mm": 0.1,
+        "ang_deg": 0.5,
+        "ang_sym_deg": 0.5,
+        "task1_mm": 0.3,
+        "scenario": "free",
+        "visible": 0.85,
+        "depth_mm": 100.0,
+        "end_decided_by": "colour",
+        "ms": ms,
+    }
+    refused = {
+        "found": False,
+        "scenario": "held_psm1",
+        "visible": 0.5,
+        "reason": "the best pose misses the needle's outline by 0.9 px",
+    }
+    s = needle_summary.summary([good, refused])
+    assert s["success_rate"] == 0.5 and s["not_found"] == 1
+    assert s["not_found_reasons"] == {"misses the needle's outline": 1}
+    assert np.isclose(s["mean_pos_err_mm"], 0.1)
+    by_vis = s["by_visible_share"]
+    assert set(by_vis) == {"0.00-0.60", "0.80-0.97"}
+    assert by_vis["0.00-0.60"]["success_rate"] == 0.0 and by_vis["0.00-0.60"]["not_found"] == 1
+    assert by_vis["0.80-0.97"]["success_rate"] == 1.0
