@@ -26,12 +26,12 @@ from suture_bt.perception.needle_prior import HeldPrior, NeedlePrior, PortPrior
 PRIOR_PX = 0.3
 #: Edge points each of a prior's three components weighs in the polish (neighbouring edge
 #: points are not independent, so one counts for less than its residual says). Development
-#: task sets with priors (seeds 6173, 1000 and 3131's 200 `in_port` scenes; the priors
-#: perturbed by the measured calibration and crossing errors, as the benchmark does since
-#: session 30): 4 → 12 → 30 → 60 took the right `in_port` answers' angle error from 1.67 to
-#: 1.41, 1.34 and 1.46° at the 90th percentile (largest 4.40 → 3.63° at 30), `handover`'s
-#: from 0.64 to 0.46° at 30, with no wrong answer at any. (Session 12: 1 → 4 took
-#: held_presented from 0.36 to 0.30° and in a port from 0.48 to 0.44° mean.)
+#: task sets with priors (seeds 6173, 1000 and 3131's 200 `in_port` scenes: 520 calls; the
+#: priors' points perturbed by 0.10 mm per axis at the pinch and 0.12 mm at the ports, about
+#: the errors the benchmark draws since session 30): 4 → 12 → 30 → 60 took the right `in_port`
+#: answers' angle error at the 90th percentile from 1.67 to 1.41, 1.34 and 1.46° (largest
+#: 4.40 → 3.63° at 30), `handover`'s from 0.64 to 0.46° at 30, with no wrong answer at any.
+#: (Earlier, 1 → 4 took held_presented from 0.36 to 0.30° and in a port from 0.48 to 0.44° mean.)
 PRIOR_WEIGHT = 30.0
 
 
