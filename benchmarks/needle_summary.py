@@ -6,6 +6,14 @@ from __future__ import annotations
 
 import numpy as np
 
+#: An answer at least this far off (mm, deg) is wrong; a right one is an answer nearer in both.
+WRONG_MM, WRONG_DEG = 2.0, 5.0
+
+
+def _right(r: dict, angle: str = "ang_deg") -> bool:
+    """Whether row ``r`` answered within WRONG_MM and WRONG_DEG (by its ``angle`` field)."""
+    return bool(r["found"] and r["pos_mm"] < WRONG_MM and r[angle] < WRONG_DEG)
+
 
 def _reason_kind(reason: str) -> str:
     """A NeedleNotFound reason without its numbers, for counting refusals by kind."""
@@ -35,9 +43,7 @@ def _group_figures(sub: list[dict]) -> dict:
     return {
         "scenes": len(sub),
         "not_found": len(sub) - len(est),
-        "success_rate": float(
-            np.mean([r["found"] and r["pos_mm"] < 2.0 and r["ang_deg"] < 5.0 for r in sub])
-        ),
+        "success_rate": float(np.mean([_right(r) for r in sub])),
         "mean_pos_err_mm": float(np.mean([r["pos_mm"] for r in est])) if est else None,
         "mean_ang_err_deg": float(np.mean([r["ang_deg"] for r in est])) if est else None,
     }
@@ -75,7 +81,7 @@ def summary(rows: list[dict]) -> dict:
             key = _reason_kind(r["reason"])
             reasons[key] = reasons.get(key, 0) + 1
     out = {"scenes": len(rows), "not_found": len(rows) - len(est), "not_found_reasons": reasons}
-    wrong = [r for r in est if r["pos_mm"] >= 2.0 or r["ang_deg"] >= 5.0]
+    wrong = [r for r in est if not _right(r)]
     out |= {"wrong": len(wrong), "wrong_rate": len(wrong) / max(len(rows), 1)}
     out["wrong_by_scenario"] = {
         k: sum(r["scenario"] == k for r in wrong) for k in sorted({r["scenario"] for r in wrong})
@@ -92,8 +98,8 @@ def summary(rows: list[dict]) -> dict:
     ang = np.array([r["ang_deg"] for r in est])
     sym = np.array([r["ang_sym_deg"] for r in est])
     t1 = np.array([r["task1_mm"] for r in est])
-    ok = [r["found"] and r["pos_mm"] < 2.0 and r["ang_deg"] < 5.0 for r in rows]
-    ok_sym = [r["found"] and r["pos_mm"] < 2.0 and r["ang_sym_deg"] < 5.0 for r in rows]
+    ok = [_right(r) for r in rows]
+    ok_sym = [_right(r, "ang_sym_deg") for r in rows]
     t = {
         k: np.array([r["ms"][k] for r in est])
         for k in ("network", "refine", "fit", "ends", "total")
