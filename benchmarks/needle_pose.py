@@ -36,10 +36,12 @@ and how far its ends moved from the end hypotheses it started from (``ends_moved
 ``HELDOUT_PHANTOM``), rebuilds it there and gives the localiser that pose's tissue model, as
 the tree's localiser is given the task's known phantom; each row records the pose
 (``phantom``). The default keeps the SRC scene's phantom (the reports of sessions 12-27).
+``--light heldout`` lights each scene otherwise (a light tilted up to 30° from overhead, a gain
+beyond training's; ``heldout_light.py``) and records it in the row (``light``).
 
     python benchmarks/needle_pose.py [--json PATH] [--n 200] [--resolution 1920x1080]
         [--prior none|held|port|task|both] [--set SET ...] [--phantom default|heldout]
-        [--exact-priors]
+        [--light default|heldout] [--exact-priors]
 """
 
 from __future__ import annotations
@@ -52,6 +54,7 @@ import time
 import needle_task_scenes
 import numpy as np
 import torch
+from heldout_light import LIGHT_STREAM, relight
 from heldout_phantom import PHANTOM_STREAM, move_phantom, task_scene, tell_localizer
 from needle_summary import summary
 from needle_task_scenes import with_measured_errors
@@ -230,6 +233,7 @@ def run(
     max_exposed: float | None = None,
     phantom: str = "default",
     exact_priors: bool = False,
+    light: str = "default",
 ) -> dict:
     """Results per set; the task sets under ``prior`` "both" (default for them when
     ``prior`` is "none") give ``SET`` (no priors) and ``SET+prior`` (task priors) on the same
@@ -256,12 +260,14 @@ def run(
             rows: dict[str, list] = {m: [] for m in modes}
             bar = tqdm(range(n), desc=f"{cond} {width}x{height}")
             for i in bar:
-                pose = None
+                pose = lit = None
                 if task:
                     s, task_priors, pose, rng = task_scene(sim, loc, cond, [seed, ci, i], phantom)
                     if not exact_priors:
                         errors = np.random.default_rng([seed, ci, i, PRIOR_ERROR_STREAM])
                         task_priors = with_measured_errors(task_priors, errors)
+                    if light == "heldout":
+                        s, lit = relight(s, [seed, ci, i, LIGHT_STREAM])
                     sim.apply(s)
                     left, mask = sim.render("left", s, rng)
                     frac, draws = _visible_fraction(sim, s, mask), 1
@@ -271,6 +277,9 @@ def run(
                         tell_localizer(sim, loc)
                     rng = np.random.default_rng([seed, ci, i])
                     s, left, frac, draws = _draw_scene(sim, cond, rng, i)
+                    if light == "heldout":
+                        s, lit = relight(s, [seed, ci, i, LIGHT_STREAM])
+                        left, _ = sim.render("left", s, rng)
                 right, _ = sim.render("right", s, rng)
                 T_true = invert(sim.stereo.left.T_world_cam) @ s.T_world_needle
                 base = {
@@ -279,6 +288,7 @@ def run(
                     "depth_mm": T_true[2, 3] * 1e3,
                     "draws": draws,
                 } | ({} if pose is None else {"phantom": pose})
+                base |= {} if lit is None else {"light": lit}
                 for m in modes:
                     pr = (task_priors if m == "task" else []) if task else _priors(sim, s, m)
                     rows[m].append(base | _localize_row(loc, left, right, T_true, pr))
@@ -330,6 +340,13 @@ def main(argv=None) -> int:
         "campaigns' ranges",
     )
     ap.add_argument(
+        "--light",
+        choices=("default", "heldout"),
+        default="default",
+        help="the overhead light and training's gains (default), or per scene a light tilted "
+        "up to 30 deg and a gain beyond training's range (heldout_light.py)",
+    )
+    ap.add_argument(
         "--exact-priors",
         action="store_true",
         help="task priors exactly where the scene holds the needle (default: off by the "
@@ -358,6 +375,7 @@ def main(argv=None) -> int:
         None if args.max_exposed_mm is None else 1e-3 * args.max_exposed_mm,
         args.phantom,
         args.exact_priors,
+        args.light,
     )
     meta = {
         "resolution": [w, h],
@@ -367,6 +385,7 @@ def main(argv=None) -> int:
         "prior": args.prior,
         "max_exposed_mm": args.max_exposed_mm,
         "phantom": args.phantom,
+        "light": args.light,
         "prior_errors": "exact" if args.exact_priors else "measured",
         "seconds": time.time() - t0,
     }

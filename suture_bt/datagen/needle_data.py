@@ -50,6 +50,8 @@ class SceneSample:
     jaw: dict
     brightness: float
     noise_std: float
+    #: Direction towards the light (world); None: the scene's overhead light.
+    light_direction: tuple[float, float, float] | None = None
 
 
 def _in_view(cam: CameraModel, pts_world: np.ndarray, margin: float, zr=(0.06, 0.22)) -> bool:
@@ -275,7 +277,7 @@ class SimScene:
     def render(self, eye: str, s: SceneSample, rng: np.random.Generator):
         """(rgb with brightness and noise, boolean needle mask) at the sampler's resolution."""
         cam = self.stereo.left if eye == "left" else self.stereo.right
-        r = self._render_view(self.world.client, cam, True)
+        r = self._render_view(self.world.client, cam, True, s.light_direction)
         mask = r.mask(self.world.needle.id)
         img = r.rgb.astype(np.float32) * s.brightness
         if s.noise_std > 0:
