@@ -36,8 +36,8 @@ and how far its ends moved from the end hypotheses it started from (``ends_moved
 ``HELDOUT_PHANTOM``), rebuilds it there and gives the localiser that pose's tissue model, as
 the tree's localiser is given the task's known phantom; each row records the pose
 (``phantom``). The default keeps the SRC scene's phantom (the reports of sessions 12-27).
-``--light heldout`` lights each scene otherwise (a light tilted up to 30° from overhead, a gain
-beyond training's; ``heldout_light.py``) and records it in the row (``light``).
+``--light heldout`` lights each scene otherwise (a light tilted up to 40° from overhead, a gain of
+0.32-2.0: the harsh lighting fault's; ``heldout_light.py``) and records it in the row (``light``).
 
     python benchmarks/needle_pose.py [--json PATH] [--n 200] [--resolution 1920x1080]
         [--prior none|held|port|task|both] [--set SET ...] [--phantom default|heldout]
@@ -344,7 +344,7 @@ def main(argv=None) -> int:
         choices=("default", "heldout"),
         default="default",
         help="the overhead light and training's gains (default), or per scene a light tilted "
-        "up to 30 deg and a gain beyond training's range (heldout_light.py)",
+        "up to 40 deg and a gain of 0.32-2.0 (heldout_light.py)",
     )
     ap.add_argument(
         "--exact-priors",

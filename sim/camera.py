@@ -44,6 +44,13 @@ BACKGROUND_RGB = (24, 14, 14)
 LIGHT_DIRECTION_WORLD = (0.0, 0.0, 1.0)
 
 
+def light_direction(tilt_deg: float, azimuth_deg: float) -> tuple[float, float, float]:
+    """Unit direction towards a light tilted ``tilt_deg`` from overhead toward world azimuth
+    ``azimuth_deg`` (the lighting fault's and the training data's tilted lights)."""
+    t, a = math.radians(tilt_deg), math.radians(azimuth_deg)
+    return (math.sin(t) * math.cos(a), math.sin(t) * math.sin(a), math.cos(t))
+
+
 def default_camera_frame() -> np.ndarray:
     """World pose of the SRC endoscope's camera frame."""
     return pose_to_transform(CAMERA_FRAME_POSITION, CAMERA_FRAME_RPY)

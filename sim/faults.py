@@ -33,7 +33,7 @@ from typing import Any
 
 import numpy as np
 
-from suture_bt.sim.camera import CaptureFault
+from suture_bt.sim.camera import CaptureFault, light_direction
 from suture_bt.sim.fault_config import FAULT_KINDS, MAX_DRIFT_DEG, MAX_DRIFT_MM, FaultConfig
 from suture_bt.sim.joint_servo import JointPlant
 from suture_bt.transforms import invert, make_transform
@@ -334,10 +334,7 @@ class WorldFaults:
         elif kind == "dark":
             self._dark = [(float(p.get("brightness", 0.25)), source)] * int(p.get("frames", 1))
         elif kind == "lighting":
-            tilt = math.radians(p.get("tilt_deg", 0.0))
-            az = math.radians(p.get("azimuth_deg", 0.0))
-            sin_t = math.sin(tilt)
-            direction = (sin_t * math.cos(az), sin_t * math.sin(az), math.cos(tilt))
+            direction = light_direction(p.get("tilt_deg", 0.0), p.get("azimuth_deg", 0.0))
             end = t + float(p["duration_s"])
             self._light = (t, end, float(p.get("brightness", 0.6)), direction)
             self._record("lighting", source, None, t, **p)

@@ -113,3 +113,13 @@ def test_capture_applies_sensor_model(client):
     assert abs(resid.mean()) < 0.5 and resid.std() == pytest.approx(4.0, rel=0.15)
     with pytest.raises(ValueError):
         StereoEndoscope(client, 320, 240, noise_std=-1)
+
+
+def test_light_direction_is_a_unit_vector_tilted_from_overhead():
+    from suture_bt.sim.camera import light_direction
+
+    d = np.array(light_direction(30.0, 90.0))
+    assert np.isclose(np.linalg.norm(d), 1.0)
+    assert np.isclose(np.degrees(np.arccos(d[2])), 30.0)
+    assert np.isclose(d[0], 0.0, atol=1e-12) and d[1] > 0
+    assert np.allclose(light_direction(0.0, 123.0), (0.0, 0.0, 1.0))

@@ -11,14 +11,7 @@ sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "benchmarks"))
 import heldout_light  # noqa: E402
 
 from suture_bt.datagen.needle_data import SimScene  # noqa: E402
-
-
-def test_light_direction_is_a_unit_vector_tilted_from_overhead():
-    d = np.array(heldout_light.light_direction(30.0, 90.0))
-    assert np.isclose(np.linalg.norm(d), 1.0)
-    assert np.isclose(np.degrees(np.arccos(d[2])), 30.0)
-    assert np.isclose(d[0], 0.0, atol=1e-12) and d[1] > 0
-    assert np.allclose(heldout_light.light_direction(0.0, 123.0), (0.0, 0.0, 1.0))
+from suture_bt.sim.camera import light_direction  # noqa: E402
 
 
 def test_relight_draws_within_range_from_its_stream_and_keeps_the_scene():
@@ -38,7 +31,7 @@ def test_relight_draws_within_range_from_its_stream_and_keeps_the_scene():
 
         # The render follows the drawn direction: tilting the light changes the image.
         quiet = dataclasses.replace(s, noise_std=0.0, brightness=1.0)
-        tilted = dataclasses.replace(quiet, light_direction=heldout_light.light_direction(30, 0))
+        tilted = dataclasses.replace(quiet, light_direction=light_direction(30, 0))
         sim.apply(quiet)
         rng = np.random.default_rng(0)
         overhead, mask = sim.render("left", quiet, rng)
