@@ -16,18 +16,21 @@ from __future__ import annotations
 
 import json
 import time
-from dataclasses import dataclass, replace
+from dataclasses import asdict, dataclass, replace
+from functools import partial
 from pathlib import Path
 
 import cv2
 import numpy as np
 from tqdm import tqdm
 
+from suture_bt.datagen.scene_variety import TRAINING_VARIETY, SceneVariety
 from suture_bt.geometry import NeedleModel
 from suture_bt.geometry.phantom import TISSUE_TOP_Z
 from suture_bt.interfaces import CameraModel, StereoCameraModel
 from suture_bt.kinematics import forward_kinematics
 from suture_bt.perception.network import INPUT_SIZE
+from suture_bt.sim.camera import LIGHT_DIRECTION_WORLD
 from suture_bt.transforms import invert, make_transform, rpy_to_matrix
 
 SCENARIOS = ("resting", "held_psm1", "held_psm2", "in_port", "free")
@@ -310,12 +313,14 @@ HIDDEN_SHARE = 0.05
 MIN_VISIBLE_PX = 30
 
 
-def _visible_scene(sim: SimScene, rng: np.random.Generator, tries: int = 20):
+def _visible_scene(sim: SimScene, rng: np.random.Generator, relight=None, tries: int = 20):
     """A sampled scene whose needle shows in the left image (the sampler's geometric checks
     miss the block hiding a needle beside it), with that image: (sample, (rgb, mask)).
-    A few hidden-needle scenes are kept on purpose as negatives."""
+    A few hidden-needle scenes are kept on purpose as negatives. ``relight`` sets a sample's
+    light and gain."""
     for _ in range(tries):
         s = sim.sampler.sample(rng)
+        s = s if relight is None else relight(s)
         sim.apply(s)
         rgb, mask = sim.render("left", s, rng)
         if mask.sum() >= MIN_VISIBLE_PX or rng.random() < HIDDEN_SHARE:
@@ -324,9 +329,15 @@ def _visible_scene(sim: SimScene, rng: np.random.Generator, tries: int = 20):
 
 
 def generate(
-    n: int, out: Path, seed: int = 0, shard_size: int = 200, progress: bool = True
+    n: int,
+    out: Path,
+    seed: int = 0,
+    shard_size: int = 200,
+    progress: bool = True,
+    variety: SceneVariety = TRAINING_VARIETY,
 ) -> dict:
-    """Render ``n`` stereo scenes (2n images) into ``out``; return the meta data."""
+    """Render ``n`` stereo scenes (2n images) into ``out``, the phantom's pose and the light
+    varied as ``variety`` says; return the meta data."""
     if n < 1:
         raise ValueError(f"n must be ≥ 1, got {n}")
     out = Path(out)
@@ -337,8 +348,13 @@ def generate(
     scale = net_w / W
     sim = SimScene(W, H, seed)
     buf: dict[str, list] = {
-        k: [] for k in ("images", "masks", "keypoints", "visible", "pose_cam", "scenario")
+        k: []
+        for k in (
+            *("images", "masks", "keypoints", "visible", "pose_cam", "scenario"),
+            *("phantom_moved", "light"),
+        )
     }
+    T_default = sim.world.task.phantom.T_world_phantom.copy()
     shard = 0
 
     def flush() -> None:
@@ -352,8 +368,12 @@ def generate(
 
     try:
         for i in tqdm(range(n), desc="needle data", disable=not progress):
+            if i % variety.phantom_block == 0:
+                T_phantom = variety.phantom_pose(seed, i // variety.phantom_block, sim.stereo)
+                sim.move_phantom(T_phantom if T_phantom is not None else T_default)
+                moved = T_phantom is not None
             rng = np.random.default_rng([seed, i])
-            s, first = _visible_scene(sim, rng)
+            s, first = _visible_scene(sim, rng, partial(variety.light, seed=seed, scene=i))
             for eye, cam in (("left", sim.stereo.left), ("right", sim.stereo.right)):
                 rgb, mask = first if eye == "left" else sim.render(eye, s, rng)
                 kp, vis = _labels(cam, s.T_world_needle, sim.model, mask, scale)
@@ -364,6 +384,8 @@ def generate(
                 buf["visible"].append(vis)
                 buf["pose_cam"].append(invert(cam.T_world_cam) @ s.T_world_needle)
                 buf["scenario"].append(SCENARIOS.index(s.scenario))
+                buf["phantom_moved"].append(moved)
+                buf["light"].append([*(s.light_direction or LIGHT_DIRECTION_WORLD), s.brightness])
             if len(buf["images"]) >= 2 * shard_size:
                 flush()
         flush()
@@ -376,6 +398,7 @@ def generate(
         "render_size": [W, H],
         "input_size": [net_w, net_h],
         "scenarios": list(SCENARIOS),
+        "variety": asdict(variety),
         "seconds": round(time.time() - t0, 1),
     }
     (out / "meta.json").write_text(json.dumps(meta, indent=2))
