@@ -71,6 +71,7 @@ def test_data_command_writes_labelled_shards(tmp_path, capsys):
     assert main(["data", "needle", "--n", "2", "--out", str(tmp_path), "--seed", "3"]) == 0
     meta = json.loads(capsys.readouterr().out.strip().splitlines()[-1])
     assert meta["n_images"] == 4 and meta["seed"] == 3
+    assert meta["variety"]["light_share"] == 0.5  # the training variety is on and recorded
     d = load_dataset(tmp_path)
     w, h = INPUT_SIZE
     assert d["images"].shape == (4, h, w, 3) and d["masks"].shape == (4, h, w)
@@ -83,6 +84,9 @@ def test_data_command_writes_labelled_shards(tmp_path, capsys):
             if vis:
                 ui, vi = int(round(u)), int(round(v))
                 assert d["masks"][i][max(vi - 3, 0) : vi + 4, max(ui - 3, 0) : ui + 4].max() > 0
+    # Each image records its phantom block's pose choice and its light (direction, gain).
+    assert d["phantom_moved"].shape == (4,) and d["light"].shape == (4, 4)
+    np.testing.assert_allclose(np.linalg.norm(d["light"][:, :3], axis=1), 1.0)
     # Left and right images of a scene share the needle pose up to the 4 mm baseline.
     dp = d["pose_cam"][0][:3, 3] - d["pose_cam"][1][:3, 3]
     assert abs(np.linalg.norm(dp) - 0.004) < 1e-6
