@@ -9,9 +9,11 @@ from suture_bt.perception.colour_refine import (
     ColourRule,
     channel_sum,
     coarse_components,
+    frame_exposure,
     needle_coloured,
     refine_mask,
     remove_thick,
+    tissue_coloured,
     violet_score,
 )
 from suture_bt.perception.needle_projection import rasterize_needle
@@ -143,3 +145,45 @@ def test_colour_tests_equal_their_numpy_reductions_on_every_colour():
     np.testing.assert_array_equal(violet_score(rgb), reference)
     c16 = rgb.astype(np.int16)
     np.testing.assert_array_equal(channel_sum(c16), c16.sum(-1))
+
+
+def test_a_dim_frame_scales_the_level_thresholds_not_the_colour_margins():
+    rule = ColourRule()
+    assert rule.at_exposure(0.95) is rule and rule.at_exposure(1.7) is rule  # nominal, bright
+    dim = rule.at_exposure(0.4)
+    k = 0.4 / 0.9
+    assert np.isclose(dim.min_level, k * rule.min_level)
+    assert np.isclose(dim.dark_level, k * rule.dark_level)
+    assert np.isclose(dim.tissue_min_red_minus_blue, k * rule.tissue_min_red_minus_blue)
+    assert dim.min_blue_minus_red == rule.min_blue_minus_red
+    assert dim.dark_min_blue_minus_red == rule.dark_min_blue_minus_red
+    # Never below the floors above sensor noise, however dark.
+    black = rule.at_exposure(0.0)
+    assert (black.min_level, black.dark_level, black.tissue_min_red_minus_blue) == (15, 20, 12)
+
+
+def test_needle_and_tissue_at_gain_0_4_pass_the_dim_rule_only():
+    # The needle's darker pixels and the pink tissue at 1 and at 0.4 × the light.
+    needle = np.array([[[92, 95, 98]]], float)
+    tissue = np.array([[[200, 130, 120]]], float)
+    rule = ColourRule()
+    for gain, passes in ((1.0, True), (0.4, False)):
+        assert needle_coloured(np.rint(needle * gain).astype(np.uint8), rule)[0, 0] == passes
+    dim = rule.at_exposure(0.4)
+    assert needle_coloured(np.rint(needle * 0.4).astype(np.uint8), dim)[0, 0]
+    c16 = np.rint(tissue * 0.35).astype(np.int16)
+    assert (
+        not tissue_coloured(c16, rule)[0, 0] and tissue_coloured(c16, rule.at_exposure(0.35))[0, 0]
+    )
+    # The cavity stays cavity in the dim rule.
+    cavity = np.rint(np.array([[[24, 14, 14]]]) * 0.4).astype(np.int16)
+    assert not tissue_coloured(cavity, dim)[0, 0]
+
+
+def test_frame_exposure_reads_the_lit_tissue_and_follows_the_gain():
+    img = np.zeros((108, 192, 3), np.uint8)
+    img[30:90, 20:170] = (195, 125, 115)  # tissue at the nominal exposure
+    img[50:60, 60:62] = (110, 112, 116)  # a needle
+    assert np.isclose(frame_exposure(img), 1.0, atol=0.01)
+    dim = np.rint(img * 0.4).astype(np.uint8)
+    assert np.isclose(frame_exposure(dim), 0.4, atol=0.01)

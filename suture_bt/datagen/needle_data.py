@@ -4,7 +4,8 @@ Front door (may import ``suture_bt.sim``; labels come from the ground-truth side
 the needle body's true pose and the renderer's segmentation). Each scene places the needle
 resting on the tissue, held in either jaw, partly inserted in a port, or free in view 80-200
 mm from the cameras; the arms are posed at random, often through the view (occlusion);
-brightness varies up to 2× and sensor noise is added.
+brightness varies up to 2× and sensor noise is added. The phantom's pose and the light vary as
+:mod:`scene_variety` says (since session 31).
 
 Dataset layout (``out/``): ``shard_XXXX.npz`` with ``images`` (n, H, W, 3) uint8 at the network
 input size, ``masks`` (n, H, W) uint8 needle coverage ×255, ``keypoints`` (n, 2, 2) base/tip

@@ -7,12 +7,13 @@ mean level ≥ ``min_level`` (40: sensor noise on a black shaft in shadow reache
 needle's darkest pixels stay above 50); a dark pixel must also be neutral (port holes and the
 cavity in shadow are red-tinted; they had entered the masks of needles in a port). The
 renderer does not anti-alias, so a per-pixel decision keeps the wire's edges where they are
-(no blur, no bias).
+(no blur, no bias). Those levels are the nominal exposure's; a dim frame scales them down
+(:meth:`ColourRule.at_exposure`, :func:`frame_exposure`).
 """
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 import cv2
 import numpy as np
@@ -32,6 +33,43 @@ class ColourRule:
     dark_min_blue_minus_red: float = -4.0
     band_px: int = 9
     min_component_px: int = 4
+    #: Tissue: red above blue by this much; cavity: level below ``min_level``.
+    tissue_min_red_minus_blue: float = 30.0
+
+    def at_exposure(self, exposure: float) -> ColourRule:
+        """This rule for a frame exposed ``exposure`` × the nominal (:func:`frame_exposure`):
+        in a dim frame (a low gain, a tilted light) the level thresholds and the tissue's red
+        excess shrink with the light, down to ``EXPOSURE_FLOORS``; the colour margins are
+        sensor noise and stay. A frame within ``EXPOSURE_KNEE`` of the nominal, or brighter
+        (it saturates), keeps the nominal rule."""
+        k = min(1.0, max(exposure, 0.0) / EXPOSURE_KNEE)
+        if k >= 1.0:
+            return self
+        lo_level, lo_dark, lo_tissue = EXPOSURE_FLOORS
+        return replace(
+            self,
+            min_level=max(k * self.min_level, lo_level),
+            dark_level=max(k * self.dark_level, lo_dark),
+            tissue_min_red_minus_blue=max(k * self.tissue_min_red_minus_blue, lo_tissue),
+        )
+
+
+#: 99th percentile of a frame's red channel (the lit tissue) at the nominal exposure (gain 1):
+#: 182-211 × the gain over 60 frames of held-out phantom poses and lights tilted 0-40° from
+#: overhead (session 31); higher with the light tilted, as one ridge flank faces it.
+NOMINAL_RED_P99 = 195.0
+#: Exposures above this share of the nominal keep the nominal rule (the estimate's own spread).
+EXPOSURE_KNEE = 0.9
+#: Lowest scaled min_level, dark_level and tissue red excess: above sensor noise on the black
+#: shaft and the cavity in a dim frame (the needle's darkest pixels at gain 0.3 reach ~29).
+EXPOSURE_FLOORS = (15.0, 20.0, 12.0)
+
+
+def frame_exposure(rgb: np.ndarray) -> float:
+    """A frame's exposure relative to the nominal: its lit tissue's red (99th percentile over
+    every 4th pixel) over :data:`NOMINAL_RED_P99`. Bright instruments can only raise it, so a
+    frame without tissue in view keeps the nominal rule."""
+    return float(np.percentile(rgb[::4, ::4, 0], 99)) / NOMINAL_RED_P99
 
 
 #: A pixel this violet (well above sensor noise on dim metal) is the swage band's.
@@ -52,6 +90,13 @@ def violet_score(rgb: np.ndarray) -> np.ndarray:
     # float64 count, stored as float32 (the same bits on every 8-bit colour, tested).
     level = np.maximum((channel_sum(c) / 3).astype(np.float32), 1.0)
     return (0.5 * (c[..., 0] + c[..., 2]) - c[..., 1]) / level
+
+
+def tissue_coloured(c16: np.ndarray, rule: ColourRule) -> np.ndarray:
+    """Pixels (int16 colours, ..., 3) of lit tissue: pink, red above blue, above the cavity's
+    level."""
+    level = channel_sum(c16) / 3.0
+    return (c16[..., 0] - c16[..., 2] >= rule.tissue_min_red_minus_blue) & (level >= rule.min_level)
 
 
 def needle_coloured(rgb: np.ndarray, rule: ColourRule) -> np.ndarray:

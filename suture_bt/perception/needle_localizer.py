@@ -32,7 +32,7 @@ import torch
 from suture_bt.geometry import NeedleModel
 from suture_bt.interfaces import StereoCameraModel
 from suture_bt.perception.base_or_tip import BaseTipChooser
-from suture_bt.perception.colour_refine import ColourRule
+from suture_bt.perception.colour_refine import ColourRule, frame_exposure
 from suture_bt.perception.exposure_gate import MAX_EXPOSED, ExposureGate
 from suture_bt.perception.fit_attempts import (  # noqa: F401 - gates, re-exported
     MAX_POSITION_STD_MM,
@@ -178,10 +178,10 @@ class NeedleLocalizer:
         self._tissue = tissue
         self.fitter.tissue_solid = getattr(tissue, "pieces", None)
 
-    @property
-    def base_tip(self) -> BaseTipChooser:
-        """The base-or-tip choice with this localiser's cameras, model, rule and tissue."""
-        return BaseTipChooser(self.stereo, self.model, self.rule, self.tissue)
+    def base_tip(self, rule: ColourRule | None = None) -> BaseTipChooser:
+        """The base-or-tip choice with this localiser's cameras, model, tissue and ``rule``
+        (a frame's; default: the nominal)."""
+        return BaseTipChooser(self.stereo, self.model, rule or self.rule, self.tissue)
 
     def network(self, left: np.ndarray, right: np.ndarray):
         """Coarse mask probabilities (2, h, w), keypoints (2, 2, 2) in full-res px, scores."""
@@ -292,6 +292,7 @@ class NeedleLocalizer:
                     f"previous must be a finite 4×4 T_cam_needle, got shape {previous.shape}"
                 )
         t0 = time.perf_counter()
+        rule = self.rule.at_exposure(frame_exposure(left))
         prob, kp, raw_score, scale = self.network(left, right)
         self.last_network = (prob, scale)
         t1 = time.perf_counter()
@@ -300,13 +301,17 @@ class NeedleLocalizer:
         # The needle's coarse blob is the one at the trusted end keypoints (coarse px).
         anchors = [(kp[e][score[e] >= MIN_KEYPOINT_SCORE] + 0.5) / scale - 0.5 for e in (0, 1)]
         try:
-            views, half_width, depth, near = self._masks((left, right), prob, scale, depth, anchors)
+            views, half_width, depth, near = self._masks(
+                (left, right), rule, prob, scale, depth, anchors
+            )
         except NeedleNotFound:
             if depth is None:
                 raise
             # A wrong disparity depth makes the wire look thicker than it can be (a needle seen
             # edge-on folds onto itself): drop the hint and gate at the nearest working distance.
-            views, half_width, depth, near = self._masks((left, right), prob, scale, None, anchors)
+            views, half_width, depth, near = self._masks(
+                (left, right), rule, prob, scale, None, anchors
+            )
         # Poses much nearer than the stereo depths say are not searched: the working floor is
         # for needles seen that near, not a licence for a near twin of a far one.
         floor = MIN_DEPTH if near is None else max(MIN_DEPTH, NEAR_SLACK * near)
@@ -316,7 +321,9 @@ class NeedleLocalizer:
         predicted = [p for p in priors if isinstance(p, PredictedPosePrior)]
         if previous is None and predicted:
             previous = self.stereo.left.T_cam_world @ np.asarray(predicted[0].T_world_needle)
-        fit = self._fit((left, right), views, ends, depth, half_width, previous, kp, score, priors)
+        fit = self._fit(
+            (left, right), rule, views, ends, depth, half_width, previous, kp, score, priors
+        )
         check_spread_in_tissue(
             fit.T_world_needle,
             fit.angle_std_deg,
@@ -325,10 +332,10 @@ class NeedleLocalizer:
             self.model,
             self.max_angle_std_deg_in_tissue,
         )
-        exposure = self._exposure((left, right), views, fit.T_cam_needle, priors)
+        exposure = self._exposure((left, right), rule, views, fit.T_cam_needle, priors)
         t3 = time.perf_counter()
         jaws = [p for p in priors if isinstance(p, AcrossJawsPrior)]
-        T_cam, evidence, decided_by = self.base_tip.orient(
+        T_cam, evidence, decided_by = self.base_tip(rule).orient(
             fit.T_cam_needle, (left, right), views, half_width, previous, jaws
         )
         check_orientation(predicted, self.stereo.left.T_world_cam @ T_cam, decided_by)
@@ -371,29 +378,30 @@ class NeedleLocalizer:
             out.append((np.column_stack([xs, ys]) + 0.5) * scale - 0.5)
         return out[0], out[1]
 
-    def _exposure(self, images, views, T_cam: np.ndarray, priors) -> ArcExposure:
+    def _exposure(self, images, rule, views, T_cam: np.ndarray, priors) -> ArcExposure:
         """:class:`~suture_bt.perception.exposure_gate.ExposureGate` with this localiser's
-        cameras, model, colour rule, tissue model and exposure limit."""
-        gate = ExposureGate(self.stereo, self.model, self.rule, self.tissue, self.max_exposed)
+        cameras, model, tissue model and exposure limit, and the frame's colour rule."""
+        gate = ExposureGate(self.stereo, self.model, rule, self.tissue, self.max_exposed)
         return gate(images, views, T_cam, priors)
 
-    def _masks(self, images, prob, scale, depth, anchors=(None, None)):
+    def _masks(self, images, rule, prob, scale, depth, anchors=(None, None)):
         """:class:`~suture_bt.perception.needle_masks.NeedleMasks` with this localiser's
-        cameras, model, colour rule, coarse threshold and free-space choice."""
+        cameras, model, coarse threshold and free-space choice, and the frame's colour rule."""
         masks = NeedleMasks(
-            self.stereo, self.model, self.rule, self.coarse_threshold, self.use_free_space
+            self.stereo, self.model, rule, self.coarse_threshold, self.use_free_space
         )
         return masks(images, prob, scale, depth, anchors)
 
     def _fit(
-        self, images, views, ends, depth, half_width, previous, kp, score, priors=()
+        self, images, rule, views, ends, depth, half_width, previous, kp, score, priors=()
     ) -> PoseFitResult:
         """:class:`~suture_bt.perception.fit_attempts.FitAttempts` with this localiser's
-        cameras, model, colour rule, fitter and gates (the spread limit for these priors)."""
+        cameras, model, fitter and gates (the spread limit for these priors), and the frame's
+        colour rule."""
         attempts = FitAttempts(
             self.stereo,
             self.model,
-            self.rule,
+            rule,
             self.fitter,
             self.max_rms_px,
             self._angle_std_limit(priors),

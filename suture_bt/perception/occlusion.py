@@ -23,6 +23,7 @@ from suture_bt.perception.colour_refine import (
     ColourRule,
     channel_sum,
     needle_coloured,
+    tissue_coloured,
     violet_score,
 )
 from suture_bt.perception.pose_fit import MaskView, edge_points
@@ -32,8 +33,6 @@ EXTENSIONS = (0.35, 0.7)
 #: Least share of an end's neighbourhood that must be lit tissue, and dark cavity, for the end
 #: to sit on the tissue's silhouette.
 SILHOUETTE_SHARE = 0.1
-#: Tissue: red above blue by this much (8-bit levels); cavity: level below the needle's floor.
-TISSUE_RED_MINUS_BLUE = 30.0
 #: Least share of the pixels beside the wire near an end that must be dark cavity for lit
 #: tissue ahead of that end to be the silhouette that hides the wire (a wire seen over the
 #: cavity, cut off where the tissue begins), not tissue behind a wire that ends over it.
@@ -65,7 +64,7 @@ def end_is_occluded(
         return True
     c16 = rgb[c:d, a:b].astype(np.int16)
     level = channel_sum(c16) / 3.0
-    tissue = (c16[..., 0] - c16[..., 2] >= TISSUE_RED_MINUS_BLUE) & (level >= rule.min_level)
+    tissue = tissue_coloured(c16, rule)
     cavity = level < rule.min_level
     n = max(int(near.sum()), 1)
     share = min((tissue & near).sum(), (cavity & near & ~mask).sum()) / n
@@ -134,7 +133,7 @@ def silhouette_cut(
     ys, xs = np.nonzero(ring)
     c16 = crop[ys, xs].astype(np.int16)
     dark = channel_sum(c16) / 3.0 < rule.min_level
-    lit = (c16[:, 0] - c16[:, 2] >= TISSUE_RED_MINUS_BLUE) & ~dark
+    lit = tissue_coloured(c16, rule)
     if not dark.any() or not lit.any():
         return out
     my, mx = np.nonzero(mask)

@@ -32,9 +32,8 @@ from suture_bt.geometry import NeedleModel
 from suture_bt.geometry.phantom import TISSUE_TOP_Z, TISSUE_X, TISSUE_Y
 from suture_bt.geometry.tissue_surface import solid_pieces
 from suture_bt.interfaces import StereoCameraModel
-from suture_bt.perception.colour_refine import ColourRule, channel_sum, needle_coloured
+from suture_bt.perception.colour_refine import ColourRule, needle_coloured, tissue_coloured
 from suture_bt.perception.mask_view import MaskView
-from suture_bt.perception.occlusion import TISSUE_RED_MINUS_BLUE
 
 #: Centre-line samples (over the whole arc, about 0.35 mm apart).
 N_SAMPLES = 64
@@ -156,10 +155,7 @@ def arc_exposure(
             sub[d_metal[iv, iu] <= reach_hide] = HIDDEN
             sub[in_tissue[inside]] = HIDDEN
             if tissue_hides:
-                c16 = img[c:d, a:b][iv, iu].astype(np.int16)
-                level = channel_sum(c16) / 3.0
-                pink = (c16[:, 0] - c16[:, 2] >= TISSUE_RED_MINUS_BLUE) & (level >= rule.min_level)
-                sub[pink] = HIDDEN
+                sub[tissue_coloured(img[c:d, a:b][iv, iu].astype(np.int16), rule)] = HIDDEN
             sub[d_mask[iv, iu] <= reach_seen] = SEEN
             cls[inside] = sub
         cls[border] = HIDDEN
