@@ -71,7 +71,7 @@ def test_data_command_writes_labelled_shards(tmp_path, capsys):
     assert main(["data", "needle", "--n", "2", "--out", str(tmp_path), "--seed", "3"]) == 0
     meta = json.loads(capsys.readouterr().out.strip().splitlines()[-1])
     assert meta["n_images"] == 4 and meta["seed"] == 3
-    assert meta["variety"]["light_share"] == 0.5  # the training variety is on and recorded
+    assert meta["variety"]["light_share"] == 0.0  # the shipped weights' data: default scene
     d = load_dataset(tmp_path)
     w, h = INPUT_SIZE
     assert d["images"].shape == (4, h, w, 3) and d["masks"].shape == (4, h, w)
@@ -90,3 +90,15 @@ def test_data_command_writes_labelled_shards(tmp_path, capsys):
     # Left and right images of a scene share the needle pose up to the 4 mm baseline.
     dp = d["pose_cam"][0][:3, 3] - d["pose_cam"][1][:3, 3]
     assert abs(np.linalg.norm(dp) - 0.004) < 1e-6
+
+
+def test_varied_data_command_moves_the_phantom_and_tilts_the_light(tmp_path, capsys):
+    assert main(["data", "needle-varied", "--n", "12", "--out", str(tmp_path), "--seed", "2"]) == 0
+    meta = json.loads(capsys.readouterr().out.strip().splitlines()[-1])
+    assert meta["variety"]["light_share"] == 0.5 and meta["variety"]["phantom_share"] == 0.6
+    d = load_dataset(tmp_path)
+    tilted = np.abs(d["light"][:, 2] - 1.0) > 1e-9
+    assert tilted.any() and not tilted.all()
+    # Both images of a scene share its light; a block of scenes shares its phantom pose.
+    np.testing.assert_array_equal(d["light"][0::2], d["light"][1::2])
+    assert len(set(d["phantom_moved"][:20].tolist())) == 1

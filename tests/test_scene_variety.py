@@ -7,7 +7,7 @@ import numpy as np
 import pytest
 
 from suture_bt.datagen.needle_data import SceneSample
-from suture_bt.datagen.scene_variety import NO_VARIETY, TRAINING_VARIETY, SceneVariety
+from suture_bt.datagen.scene_variety import DEFAULT_SCENE, VARIED_SCENES, SceneVariety
 from suture_bt.geometry import PhantomModel
 from suture_bt.sim.camera import stereo_model
 
@@ -18,7 +18,7 @@ def _sample() -> SceneSample:
 
 def test_phantom_poses_are_reproducible_within_range_with_every_port_in_view():
     stereo = stereo_model(640, 360)
-    v = TRAINING_VARIETY
+    v = VARIED_SCENES
     poses = [v.phantom_pose(1, b, stereo) for b in range(40)]
     assert poses[7] is None or np.allclose(poses[7], v.phantom_pose(1, 7, stereo))
     moved = [T for T in poses if T is not None]
@@ -30,7 +30,7 @@ def test_phantom_poses_are_reproducible_within_range_with_every_port_in_view():
         for cam in (stereo.left, stereo.right):
             uv = cam.project(ports)
             assert np.all((uv >= 0) & (uv < (cam.width, cam.height)))
-    assert all(NO_VARIETY.phantom_pose(1, b, stereo) is None for b in range(20))
+    assert all(DEFAULT_SCENE.phantom_pose(1, b, stereo) is None for b in range(20))
 
 
 def test_lights_tilt_and_darken_within_range_and_keep_the_scene():
@@ -43,12 +43,12 @@ def test_lights_tilt_and_darken_within_range_and_keep_the_scene():
         assert v.dark_gain[0] <= lit.brightness <= v.dark_gain[1]
         assert lit.scenario == s.scenario and lit.noise_std == s.noise_std
     assert v.light(s, seed=3, scene=4) == v.light(s, seed=3, scene=4)
-    assert NO_VARIETY.light(s, seed=3, scene=4) == s
+    assert DEFAULT_SCENE.light(s, seed=3, scene=4) == s
 
 
 @pytest.mark.parametrize("share", [0.0, 0.5])
 def test_light_shares_are_kept(share):
-    v = dataclasses.replace(TRAINING_VARIETY, light_share=share, dark_share=share)
+    v = dataclasses.replace(VARIED_SCENES, light_share=share, dark_share=share)
     lit = [v.light(_sample(), seed=9, scene=i) for i in range(400)]
     tilted = np.mean([x.light_direction is not None for x in lit])
     dark = np.mean([x.brightness != 1.2 for x in lit])

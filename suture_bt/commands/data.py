@@ -22,6 +22,15 @@ def _needle(n: int, out: Path, seed: int) -> dict:
     return generate(n, out, seed)
 
 
+@target("needle-varied")
+def _needle_varied(n: int, out: Path, seed: int) -> dict:
+    """Needle data with the phantom moved and the light tilted in a share of the scenes."""
+    from suture_bt.datagen.needle_data import generate
+    from suture_bt.datagen.scene_variety import VARIED_SCENES
+
+    return generate(n, out, seed, variety=VARIED_SCENES)
+
+
 @target("calibration")
 def _calibration(n: int, out: Path, seed: int) -> dict:
     from suture_bt.datagen.calibration_data import generate

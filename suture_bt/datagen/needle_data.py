@@ -4,8 +4,8 @@ Front door (may import ``suture_bt.sim``; labels come from the ground-truth side
 the needle body's true pose and the renderer's segmentation). Each scene places the needle
 resting on the tissue, held in either jaw, partly inserted in a port, or free in view 80-200
 mm from the cameras; the arms are posed at random, often through the view (occlusion);
-brightness varies up to 2× and sensor noise is added. The phantom's pose and the light vary as
-:mod:`scene_variety` says (since session 31).
+brightness varies up to 2× and sensor noise is added. ``variety`` may also move the phantom
+and tilt the light (:mod:`scene_variety`; off for the shipped weights' data).
 
 Dataset layout (``out/``): ``shard_XXXX.npz`` with ``images`` (n, H, W, 3) uint8 at the network
 input size, ``masks`` (n, H, W) uint8 needle coverage ×255, ``keypoints`` (n, 2, 2) base/tip
@@ -25,7 +25,7 @@ import cv2
 import numpy as np
 from tqdm import tqdm
 
-from suture_bt.datagen.scene_variety import TRAINING_VARIETY, SceneVariety
+from suture_bt.datagen.scene_variety import DEFAULT_SCENE, SceneVariety
 from suture_bt.geometry import NeedleModel
 from suture_bt.geometry.phantom import TISSUE_TOP_Z
 from suture_bt.interfaces import CameraModel, StereoCameraModel
@@ -335,7 +335,7 @@ def generate(
     seed: int = 0,
     shard_size: int = 200,
     progress: bool = True,
-    variety: SceneVariety = TRAINING_VARIETY,
+    variety: SceneVariety = DEFAULT_SCENE,
 ) -> dict:
     """Render ``n`` stereo scenes (2n images) into ``out``, the phantom's pose and the light
     varied as ``variety`` says; return the meta data."""
@@ -355,7 +355,7 @@ def generate(
             *("phantom_moved", "light"),
         )
     }
-    T_default = sim.world.task.phantom.T_world_phantom.copy()
+    T_default, moved = sim.world.task.phantom.T_world_phantom.copy(), False
     shard = 0
 
     def flush() -> None:
@@ -371,7 +371,8 @@ def generate(
         for i in tqdm(range(n), desc="needle data", disable=not progress):
             if i % variety.phantom_block == 0:
                 T_phantom = variety.phantom_pose(seed, i // variety.phantom_block, sim.stereo)
-                sim.move_phantom(T_phantom if T_phantom is not None else T_default)
+                if T_phantom is not None or moved:  # the default scene is never rebuilt
+                    sim.move_phantom(T_phantom if T_phantom is not None else T_default)
                 moved = T_phantom is not None
             rng = np.random.default_rng([seed, i])
             s, first = _visible_scene(sim, rng, partial(variety.light, seed=seed, scene=i))

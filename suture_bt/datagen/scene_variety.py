@@ -1,13 +1,14 @@
 """How far the needle training scenes stray from the SRC default scene: phantom pose and light.
 
-Until session 31 every training image showed the phantom at its default pose, lit from
-overhead with a gain of 0.7-2.0, while held-out scenes move, turn and tilt the phantom and
-light it otherwise (a campaign's brightness, the lighting fault's tilted light and gain).
-The network then saw a clearly visible wire on a moved phantom as background. Here a share of
-the scenes moves the phantom (one pose per block of scenes: rebuilding it costs a render's
-time) beyond the held-out campaigns' ranges, tilts the light as far as the harsh lighting
-fault does, and darkens some images below the old range. Each draw has its own random stream,
-so a scene's needle and arms are those it had before.
+The shipped weights' data (``suture-bt data needle``, :data:`DEFAULT_SCENE`) shows the phantom
+at its default pose, lit from overhead with a gain of 0.7-2.0, while held-out scenes move, turn
+and tilt the phantom and light it otherwise. ``suture-bt data needle-varied``
+(:data:`VARIED_SCENES`) moves the phantom in a share of the scenes (one pose per block of
+scenes: rebuilding it costs a render's time) beyond the held-out campaigns' ranges, tilts the
+light as far as the harsh lighting fault does, and darkens some images below that range. Each
+draw has its own random stream, so a scene's needle and arms are those it has without them.
+Session 31 trained on it and did not ship the weights (README, "Reproducing the shipped
+weights").
 """
 
 from __future__ import annotations
@@ -64,7 +65,7 @@ class SceneVariety:
         )
 
 
-#: The training data's variety (``suture-bt data needle``).
-TRAINING_VARIETY = SceneVariety()
-#: The SRC default scene only (the training data of sessions up to 30).
-NO_VARIETY = SceneVariety(phantom_share=0.0, light_share=0.0, dark_share=0.0)
+#: Phantom poses and lights varied (``suture-bt data needle-varied``).
+VARIED_SCENES = SceneVariety()
+#: The SRC default scene only: the shipped weights' data (``suture-bt data needle``).
+DEFAULT_SCENE = SceneVariety(phantom_share=0.0, light_share=0.0, dark_share=0.0)
