@@ -7,6 +7,7 @@ import pytest
 from suture_bt.geometry import NeedleModel
 from suture_bt.interfaces import CameraModel, StereoCameraModel
 from suture_bt.perception.arc_evidence import arc_support
+from suture_bt.perception.colour_refine import ColourRule
 from suture_bt.transforms import make_transform, rpy_to_matrix
 
 W, H = 640, 480
@@ -145,3 +146,16 @@ def test_support_per_eye_is_independent(images):
     blank[:] = TISSUE
     left, right = arc_support((images[0], blank), STEREO, T_NEEDLE, NEEDLE, PIECE)
     assert left >= 0.9 and right == 0.0
+
+
+def test_a_dim_frame_still_supports_the_drawn_piece(images):
+    # At 0.25 x the light the metal's level (38) is under the nominal rule's floor (40); the
+    # frame's exposure rule scales its limits down: the piece is seen where it is drawn, and
+    # not 3 mm across it.
+    dim = tuple(np.rint(img * 0.25).astype(np.uint8) for img in images)
+    nominal = arc_support(dim, STEREO, T_NEEDLE, NEEDLE, PIECE, rule=ColourRule())
+    assert max(nominal) <= 0.1
+    left, right = arc_support(dim, STEREO, T_NEEDLE, NEEDLE, PIECE)
+    assert left >= 0.9 and right >= 0.9
+    beside = arc_support(dim, STEREO, _shifted(T_NEEDLE, 0.003 * _across_piece()), NEEDLE, PIECE)
+    assert max(beside) <= 0.1

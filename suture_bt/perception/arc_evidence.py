@@ -15,15 +15,16 @@ import numpy as np
 
 from suture_bt.geometry import NeedleModel
 from suture_bt.interfaces import StereoCameraModel
-from suture_bt.perception.colour_refine import ColourRule, needle_coloured
+from suture_bt.perception.colour_refine import ColourRule, frame_exposure, needle_coloured
 
 
 def metal_masks(
     images: tuple[np.ndarray, np.ndarray], reach_px: int = 4, rule: ColourRule | None = None
 ) -> tuple[np.ndarray, np.ndarray]:
     """Needle-coloured pixels of each eye, grown by ``reach_px`` (what :func:`arc_hits` reads;
-    compute once per frame when asking about many poses)."""
-    rule = rule or ColourRule()
+    compute once per frame when asking about many poses). Without a ``rule``, the nominal one
+    at the frame's exposure (:meth:`ColourRule.at_exposure`)."""
+    rule = rule or ColourRule().at_exposure(frame_exposure(images[0]))
     kernel = cv2.getStructuringElement(cv2.MORPH_ELLIPSE, (2 * reach_px + 1, 2 * reach_px + 1))
     grown = [cv2.dilate(needle_coloured(img, rule).astype(np.uint8), kernel) > 0 for img in images]
     return grown[0], grown[1]
