@@ -1,10 +1,10 @@
 """Held-out lighting for the needle-pose benchmark (``needle_pose.py --light heldout``).
 
-The localiser's training data was lit from overhead with a camera gain of 0.7-2.0 until
-session 31. A held-out scene may be lit otherwise: the world's harsh lighting fault tilts the
-light up to 40° from overhead toward any azimuth and scales the image by 0.4-1.6
-(``sim/fault_profiles.yaml``), on top of the scene's camera brightness (0.8-1.25 in a
-campaign). Each benchmark scene here draws its light's tilt from ``HELDOUT_TILT_DEG`` and its
+The shipped weights' training data is lit from overhead with a camera gain of 0.7-2.0 (the
+benchmark's scenes too, by default). A held-out scene may be lit otherwise: the world's harsh
+lighting fault tilts the light up to 40° from overhead toward any azimuth and scales the image
+by 0.4-1.6 (``sim/fault_profiles.yaml``), on top of the scene's camera brightness (0.8-1.25 in
+a campaign). Each benchmark scene here draws its light's tilt from ``HELDOUT_TILT_DEG`` and its
 gain from ``HELDOUT_GAIN`` (that product's range) from its own random stream, so the scene's
 other draws are those of the overhead-lit run.
 """
