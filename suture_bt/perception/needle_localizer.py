@@ -292,8 +292,8 @@ class NeedleLocalizer:
                     f"previous must be a finite 4×4 T_cam_needle, got shape {previous.shape}"
                 )
         t0 = time.perf_counter()
+        prob, kp, raw_score, scale = self.network(left, right)  # checks the images
         rule = self.rule.at_exposure(frame_exposure(left))
-        prob, kp, raw_score, scale = self.network(left, right)
         self.last_network = (prob, scale)
         t1 = time.perf_counter()
         score = self._plausible(kp, raw_score, prob, scale)
