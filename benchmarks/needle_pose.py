@@ -50,6 +50,7 @@ import argparse
 import json
 import sys
 import time
+from dataclasses import dataclass, field, replace
 
 import needle_task_scenes
 import numpy as np
@@ -64,6 +65,7 @@ from tqdm import tqdm
 from suture_bt.datagen.needle_data import SimScene
 from suture_bt.geometry.needle import SCORED_POINTS
 from suture_bt.kinematics import forward_kinematics
+from suture_bt.perception.answer_gates import AnswerGates
 from suture_bt.perception.arc_geometry import arc_distance
 from suture_bt.perception.in_hand import JAW_POINT_IN_TIP
 from suture_bt.perception.needle_localizer import MAX_ANGLE_STD_DEG, NeedleLocalizer
@@ -205,7 +207,7 @@ def _localize_row(loc, left, right, T_true, priors) -> dict:
 
 def _keypoint_end_px(loc, est) -> list[float]:
     """Left image: distance (px) from each confident keypoint to the nearer fitted end."""
-    from suture_bt.perception.needle_localizer import STRONG_KEYPOINT_SCORE
+    from suture_bt.perception.fit_attempts import STRONG_KEYPOINT_SCORE
     from suture_bt.perception.needle_projection import end_pixels
 
     ends = np.asarray(end_pixels(loc.stereo.left, est.T_cam_needle, loc.model))
@@ -220,39 +222,48 @@ def _ms(t0: float) -> float:
     return 1e3 * (time.perf_counter() - t0)
 
 
-def run(
-    n: int,
-    width: int,
-    height: int,
-    seed: int,
-    weights: str | None,
-    threads: int,
-    conditions=("unoccluded", "occluded"),
-    max_angle_std_deg: float = MAX_ANGLE_STD_DEG,
-    prior: str = "none",
-    max_exposed: float | None = None,
-    phantom: str = "default",
-    exact_priors: bool = False,
-    light: str = "default",
-) -> dict:
-    """Results per set; the task sets under ``prior`` "both" (default for them when
-    ``prior`` is "none") give ``SET`` (no priors) and ``SET+prior`` (task priors) on the same
-    scenes; "task" only the latter."""
-    torch.set_num_threads(threads)
+@dataclass(frozen=True)
+class BenchmarkRun:
+    """One benchmark run: the scenes (sets, how many, resolution, seed, the phantom's pose and
+    the light) and the localiser (weights, threads, refusal limits, the priors it is told)."""
+
+    n: int = 200
+    width: int = 1920
+    height: int = 1080
+    seed: int = HELD_OUT_SEED
+    sets: tuple[str, ...] = ("unoccluded", "occluded")
+    #: "default": the SRC phantom; "heldout": a pose per scene in the held-out ranges.
+    phantom: str = "default"
+    #: "default": the overhead light; "heldout": a tilted light and gain per scene.
+    light: str = "default"
+    #: Random sets: held / port priors (PRIORS; "task" and "both" mean none there); task
+    #: sets: "both" (each scene without, then with, the task priors), "task" or "none".
+    prior: str = "both"
+    #: Task priors exactly at the truth (default: off by the errors the tree measures).
+    exact_priors: bool = False
+    weights: str | None = None
+    threads: int = 1
+    gates: AnswerGates = field(default_factory=AnswerGates)
+
+
+def run(cfg: BenchmarkRun) -> dict:
+    """Results per set; the task sets under ``cfg.prior`` "both" give ``SET`` (no priors) and
+    ``SET+prior`` (task priors) on the same scenes, "task" only the latter, "none" only the
+    former."""
+    n, width, height, seed, prior = cfg.n, cfg.width, cfg.height, cfg.seed, cfg.prior
+    torch.set_num_threads(cfg.threads)
     sim = SimScene(width, height)
     ph = sim.world.task.phantom
-    kw = {} if max_exposed is None else {"max_exposed": max_exposed}
     loc = NeedleLocalizer(
         sim.stereo,
-        weights=weights,
-        max_angle_std_deg=max_angle_std_deg,
+        weights=cfg.weights,
+        gates=cfg.gates,
         tissue=phantom_tissue(ph, sim.stereo.left.T_world_cam[:3, 3]),
-        **kw,
     )
     results = {}
     try:
         for ci, cond in enumerate(SETS):
-            if cond not in conditions:
+            if cond not in cfg.sets:
                 continue
             task = cond in needle_task_scenes.TASK_SETS
             modes = {"none": ("none",), "task": ("task",)}.get(prior, ("none", "task"))
@@ -262,22 +273,24 @@ def run(
             for i in bar:
                 pose = lit = None
                 if task:
-                    s, task_priors, pose, rng = task_scene(sim, loc, cond, [seed, ci, i], phantom)
-                    if not exact_priors:
+                    s, task_priors, pose, rng = task_scene(
+                        sim, loc, cond, [seed, ci, i], cfg.phantom
+                    )
+                    if not cfg.exact_priors:
                         errors = np.random.default_rng([seed, ci, i, PRIOR_ERROR_STREAM])
                         task_priors = with_measured_errors(task_priors, errors)
-                    if light == "heldout":
+                    if cfg.light == "heldout":
                         s, lit = relight(s, [seed, ci, i, LIGHT_STREAM])
                     sim.apply(s)
                     left, mask = sim.render("left", s, rng)
                     frac, draws = _visible_fraction(sim, s, mask), 1
                 else:
-                    if phantom == "heldout":
+                    if cfg.phantom == "heldout":
                         pose = move_phantom(sim, [seed, ci, i, PHANTOM_STREAM])
                         tell_localizer(sim, loc)
                     rng = np.random.default_rng([seed, ci, i])
                     s, left, frac, draws = _draw_scene(sim, cond, rng, i)
-                    if light == "heldout":
+                    if cfg.light == "heldout":
                         s, lit = relight(s, [seed, ci, i, LIGHT_STREAM])
                         left, _ = sim.render("left", s, rng)
                 right, _ = sim.render("right", s, rng)
@@ -362,21 +375,13 @@ def main(argv=None) -> int:
     w, h = (int(v) for v in args.resolution.lower().split("x"))
     t0 = time.time()
     conds = tuple(args.set) if args.set else (args.only,) if args.only else SETS[:2]
-    res = run(
-        args.n,
-        w,
-        h,
-        args.seed,
-        args.weights,
-        args.threads,
-        conds,
-        args.max_angle_std_deg,
-        args.prior,
-        None if args.max_exposed_mm is None else 1e-3 * args.max_exposed_mm,
-        args.phantom,
-        args.exact_priors,
-        args.light,
+    gates = AnswerGates(max_angle_std_deg=args.max_angle_std_deg)
+    if args.max_exposed_mm is not None:
+        gates = replace(gates, max_exposed=1e-3 * args.max_exposed_mm)
+    cfg = BenchmarkRun(
+        args.n, w, h, args.seed, conds, args.phantom, args.light, args.prior, args.exact_priors
     )
+    res = run(replace(cfg, weights=args.weights, threads=args.threads, gates=gates))
     meta = {
         "resolution": [w, h],
         "n": args.n,

@@ -20,6 +20,8 @@ the right one of the localiser's mirror twins, or make it refuse naming them.
 
 from __future__ import annotations
 
+from dataclasses import replace
+
 import numpy as np
 
 from suture_bt.interfaces import FrameLost, StereoCameraInterface
@@ -112,9 +114,9 @@ class VisionNeedleSensor:
         self.last_frame, self.last_estimate, self.last_refused = frame, None, None
         T_cam_world = self.camera.model.left.T_cam_world
         prev_cam = None if previous is None else T_cam_world @ np.asarray(previous, dtype=float)
-        strict_rms = self.localizer.max_rms_px
+        gates = self.localizer.gates
         if prior_checked and prev_cam is not None:
-            self.localizer.max_rms_px = max(strict_rms, PRIOR_CHECKED_RMS_PX)
+            gates = replace(gates, max_rms_px=max(gates.max_rms_px, PRIOR_CHECKED_RMS_PX))
         try:
             est = self.localizer.localize(
                 frame.left,
@@ -123,6 +125,7 @@ class VisionNeedleSensor:
                 priors=self.priors(
                     previous, prior_checked, holder, holder_tolerance, jaw_tolerance_deg, held_face
                 ),
+                gates=gates,
             )
         except NeedleNotFound as exc:
             best = getattr(exc, "best", None)
@@ -130,8 +133,6 @@ class VisionNeedleSensor:
                 best = self.camera.model.left.T_world_cam @ best
             self.last_refused = best
             raise NeedleNotSeen(str(exc), getattr(exc, "unseen_eye", None), best) from exc
-        finally:
-            self.localizer.max_rms_px = strict_rms
         self.last_estimate = est
         return NeedleObservation(
             est.T_world_needle.copy(),

@@ -3,6 +3,8 @@ insertion, on its way to the tissue, out of reach, arched over the ridge or turn
 the geometry that tells where a dropped needle lies (caught in a port, hanging on its pair's
 circle, part way through)."""
 
+from dataclasses import replace
+from math import inf
 from types import SimpleNamespace
 
 import numpy as np
@@ -137,9 +139,10 @@ def test_needle_dropped_out_of_both_arms_reach_fails_the_throw_saying_so(session
     # wire, and since the tree's localiser knows the phantom (session 18) the floor cannot hide
     # it ("not found" again). And so is the spread limit, which without priors is 1.5° since
     # session 19: this far away the fit's predicted angle spread is 1.9°.
-    session.context.sensor.localizer.max_position_std_mm = float("inf")
-    session.context.sensor.localizer.max_exposed = float("inf")
-    session.context.sensor.localizer.max_angle_std_deg = float("inf")
+    localizer = session.context.sensor.localizer
+    localizer.gates = replace(
+        localizer.gates, max_position_std_mm=inf, max_exposed=inf, max_angle_std_deg=inf
+    )
     t_drop = session.context.clock.now()
     throw = finish(session)
     assert throw["status"] == "FAILURE"

@@ -6,6 +6,7 @@ import pytest
 from perception_helpers import stereo
 from test_pose_fit import MODEL
 
+from suture_bt.perception.answer_gates import AnswerGates
 from suture_bt.perception.entry_starts import entry_starts, seen_at_right_end, surface_hit
 from suture_bt.perception.needle_projection import project_cam, transform_points
 from suture_bt.perception.tissue_cut import TissueCut
@@ -115,7 +116,7 @@ def test_a_needle_going_into_the_ridge_is_found_from_the_tissue_alone():
     loc = NeedleLocalizer(st, tissue=tissue)
     with pytest.raises(NeedleNotFound, match="inside the tissue"):
         loc.localize(left, right)
-    loc.max_angle_std_deg_in_tissue = float("inf")
+    loc.gates = AnswerGates(max_angle_std_deg_in_tissue=float("inf"))
     found = loc.localize(left, right)
     pos, ang = pose_errors(found.T_cam_needle, T)
     assert pos < 0.5 and ang < 2.0

@@ -8,16 +8,13 @@ from perception_helpers import pose_errors, stereo
 from scipy.spatial.transform import Rotation
 from test_pose_fit import MODEL, _scene_1080p, _tip_hidden, _views
 
+from suture_bt.perception.answer_gates import AnswerGates
 from suture_bt.perception.colour_refine import ColourRule
-from suture_bt.perception.fit_attempts import (
-    MAX_RIVAL_RATIO,
-    MAX_TIE_RATIO,
-    FitAttempts,
-    _same_pair,
-)
+from suture_bt.perception.fit_attempts import FitAttempts, _same_pair
 from suture_bt.perception.needle_prior import HeldPrior
 from suture_bt.perception.needle_projection import project_cam, transform_points
 from suture_bt.perception.pose_fit import NeedleNotFound, PoseFitter
+from suture_bt.perception.rival_probe import MAX_RIVAL_RATIO, MAX_TIE_RATIO
 
 
 def test_end_pairs_match_in_either_order_within_tolerance():
@@ -26,8 +23,9 @@ def test_end_pairs_match_in_either_order_within_tolerance():
     assert not _same_pair(a, (a[1], a[0] + 5.0))
 
 
-def _attempts(st, **kw) -> FitAttempts:
-    return FitAttempts(st, MODEL, ColourRule(), PoseFitter(st, MODEL), **kw)
+def _attempts(st, **gates) -> FitAttempts:
+    """The fit stage with these gates changed from the defaults."""
+    return FitAttempts(st, MODEL, ColourRule(), PoseFitter(st, MODEL), AnswerGates(**gates))
 
 
 def _args(seed: int = 7):

@@ -6,6 +6,7 @@ import pytest
 import torch
 from perception_helpers import pose_errors, stereo, task_scene
 
+from suture_bt.perception.answer_gates import AnswerGates
 from suture_bt.perception.needle_localizer import (
     HELD_PIN_TOLERANCE,
     MAX_ANGLE_STD_DEG,
@@ -77,10 +78,15 @@ def test_shipped_network_localizes_a_rendered_needle(monkeypatch):
             pytest.fail("no seeded scene shows the needle")
         right, _ = sim.render("right", s, rng)
         est = NeedleLocalizer(sim.stereo).localize(left, right)
+        strict = NeedleLocalizer(sim.stereo, gates=AnswerGates(max_rms_px=0.0))
         with pytest.raises(NeedleNotFound, match="RMS"):  # a fit worse than allowed is refused
-            NeedleLocalizer(sim.stereo, max_rms_px=0.0).localize(left, right)
+            strict.localize(left, right)
         with pytest.raises(NeedleNotFound, match="leaves the pose loose"):  # and a loose one
-            NeedleLocalizer(sim.stereo, max_angle_std_deg=0.0).localize(left, right)
+            strict.localize(left, right, gates=AnswerGates(max_angle_std_deg=0.0))
+        # Gates given for one call replace the localiser's for that call only.
+        again = strict.localize(left, right, gates=AnswerGates())
+        np.testing.assert_array_equal(again.T_cam_needle, est.T_cam_needle)
+        assert strict.gates.max_rms_px == 0.0
         with monkeypatch.context() as m:  # so is one that explains too little of the mask
             m.setattr("suture_bt.perception.fit_attempts.MIN_INLIER_FRACTION", 1.01)
             with pytest.raises(NeedleNotFound, match="holds something else"):
@@ -102,11 +108,11 @@ def test_keypoints_farther_apart_than_the_needle_can_appear_keep_only_the_strong
     loc = NeedleLocalizer(stereo(1920, 1080), net=_eager_net())
     kp = np.array([[[830.0, 220.0], [1750.0, 220.0]], [[800.0, 220.0], [900.0, 230.0]]])
     score = np.array([[0.87, 0.47], [0.6, 0.7]])
-    out = loc._plausible(kp, score)
+    out = loc.plausible(kp, score)
     np.testing.assert_array_equal(out, [[0.87, 0.0], [0.6, 0.7]])
     assert score[0, 1] == 0.47  # the raw scores are left alone
     far_weak = np.array([[0.1, 0.9], [0.6, 0.7]])  # an untrusted keypoint is no rival
-    np.testing.assert_array_equal(loc._plausible(kp, far_weak), far_weak)
+    np.testing.assert_array_equal(loc.plausible(kp, far_weak), far_weak)
 
 
 def test_of_two_keypoints_too_far_apart_the_one_on_a_speck_is_dropped_even_if_stronger():
@@ -120,9 +126,9 @@ def test_of_two_keypoints_too_far_apart_the_one_on_a_speck_is_dropped_even_if_st
     (u0, v0), (u1, v1) = np.rint((kp[0] + 0.5) / scale - 0.5).astype(int)
     prob[0, v1 - 1 : v1 + 2, u1 - 1 : u1 + 2] = 0.9  # a 3×3 speck under the stronger
     prob[0, v0 - 1 : v0 + 2, u0 - 1 : u0 + 25] = 0.9  # an arc-long blob under the weaker
-    out = loc._plausible(kp, score, prob, scale)
+    out = loc.plausible(kp, score, prob, scale)
     np.testing.assert_array_equal(out, [[0.3, 0.0], [0.6, 0.7]])
-    np.testing.assert_array_equal(loc._plausible(kp, score), [[0.0, 0.8], [0.6, 0.7]])
+    np.testing.assert_array_equal(loc.plausible(kp, score), [[0.0, 0.8], [0.6, 0.7]])
 
 
 def test_without_priors_the_spread_limit_is_tighter_and_a_pinned_holder_loosens_it():
@@ -131,12 +137,14 @@ def test_without_priors_the_spread_limit_is_tighter_and_a_pinned_holder_loosens_
     loc = NeedleLocalizer(stereo(1920, 1080), net=_eager_net())
     port = PortPrior("entry 1", np.zeros(3), 0.002)
     pinned = HeldPrior("psm2", np.zeros(3), HELD_PIN_TOLERANCE)
-    assert loc._angle_std_limit(()) == pytest.approx(MAX_ANGLE_STD_DEG_UNAIDED)
-    assert loc._angle_std_limit((port,)) == pytest.approx(MAX_ANGLE_STD_DEG)
-    assert loc._angle_std_limit((pinned,)) == pytest.approx(MAX_ANGLE_STD_DEG_HELD)
+    assert loc.gates.angle_std_limit(()) == pytest.approx(MAX_ANGLE_STD_DEG_UNAIDED)
+    assert loc.gates.angle_std_limit((port,)) == pytest.approx(MAX_ANGLE_STD_DEG)
+    assert loc.gates.angle_std_limit((pinned,)) == pytest.approx(MAX_ANGLE_STD_DEG_HELD)
     assert MAX_ANGLE_STD_DEG_UNAIDED < MAX_ANGLE_STD_DEG < MAX_ANGLE_STD_DEG_HELD
-    unlimited = NeedleLocalizer(stereo(1920, 1080), net=_eager_net(), max_angle_std_deg=np.inf)
-    assert unlimited._angle_std_limit(()) == np.inf
+    unlimited = NeedleLocalizer(
+        stereo(1920, 1080), net=_eager_net(), gates=AnswerGates(max_angle_std_deg=np.inf)
+    )
+    assert unlimited.gates.angle_std_limit(()) == np.inf
 
 
 def test_a_new_tissue_model_gives_the_fit_its_solid():
@@ -192,9 +200,14 @@ def test_grey_where_the_wire_goes_into_the_tissue_does_not_say_tip():
     # choice, which is what is tested here. So are the rival, tie and spread gates: since
     # session 20 the scene's grasp is drawn off where it was meant, and the slide along the
     # circle this view leaves loose (8-10 deg at 1.00x the cost) refuses it first.
-    loc = NeedleLocalizer(stereo_model, tissue=tissue, max_exposed=float("inf"))
-    loc.max_rival_ratio, loc.max_tie_ratio = 0.0, 0.0
-    loc.max_angle_std_deg, loc.max_position_std_mm = 1e3, 1e3
+    loose = AnswerGates(
+        max_exposed=float("inf"),
+        max_rival_ratio=0.0,
+        max_tie_ratio=0.0,
+        max_angle_std_deg=1e3,
+        max_position_std_mm=1e3,
+    )
+    loc = NeedleLocalizer(stereo_model, tissue=tissue, gates=loose)
     try:
         est = loc.localize(left, right)
     except NeedleNotFound as exc:
@@ -243,7 +256,7 @@ def test_a_keypoint_on_the_arcs_bulge_does_not_lead_to_a_confident_mirror_answer
     est = loc.localize(left, right)
     pos, ang = pose_errors(est.T_cam_needle, T)
     assert pos < 1.0 and ang < 1.0  # 0.58 mm / 0.20 deg
-    loc.refit_moved_px = float("inf")
+    loc.gates = AnswerGates(refit_moved_px=float("inf"))
     est = loc.localize(left, right)
     assert pose_errors(est.T_cam_needle, T)[1] > 90.0  # the old answer, for the record
 

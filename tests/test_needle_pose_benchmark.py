@@ -19,7 +19,7 @@ def test_errors_position_angle_and_task1():
 
 
 def test_tiny_run_localizes_an_unoccluded_scene_at_1080p():
-    res = needle_pose.run(1, 1920, 1080, needle_pose.HELD_OUT_SEED, None, 1, ("unoccluded",))
+    res = needle_pose.run(needle_pose.BenchmarkRun(n=1, sets=("unoccluded",)))
     row = res["unoccluded"]["per_scene"][0]
     assert row["visible"] >= 0.97 and 80 <= row["depth_mm"] <= 200
     assert row["found"] and row["pos_mm"] < 2.0 and row["ang_deg"] < 5.0

@@ -15,6 +15,7 @@ from perception_helpers import pose_errors
 from scipy.spatial.transform import Rotation
 from test_pose_fit import MODEL, _scene_1080p, _tip_hidden
 
+from suture_bt.perception.answer_gates import AnswerGates
 from suture_bt.perception.edge_residuals import edge_rays
 from suture_bt.perception.mask_view import edge_points
 from suture_bt.perception.needle_projection import params_to_pose, pose_to_params
@@ -199,15 +200,14 @@ def test_the_near_probe_takes_a_stopped_fit_into_the_needles_basin():
     pose (predicted spread 0.11°); the ±4/8° turns reach that pose."""
     from perception_helpers import task_scene
 
-    from suture_bt.perception.exposure_gate import MAX_EXPOSED
     from suture_bt.perception.needle_localizer import NeedleLocalizer
 
     stereo, left, right, T_true, _, tissue = task_scene("held_start", 199)
     loc = NeedleLocalizer(stereo, tissue=tissue)
     loc.fitter.probe_near = False
-    loc.max_exposed = float("inf")  # since session 19 the stopped fit is refused as exposed
-    stopped = loc.localize(left, right)
-    loc.fitter.probe_near, loc.max_exposed = True, MAX_EXPOSED
+    # Since session 19 the stopped fit is refused as exposed: that gate is off for it.
+    stopped = loc.localize(left, right, gates=AnswerGates(max_exposed=float("inf")))
+    loc.fitter.probe_near = True
     found = loc.localize(left, right)
     assert pose_errors(stopped.T_cam_needle, T_true)[1] > 3.0
     assert pose_errors(found.T_cam_needle, T_true)[1] < 0.5

@@ -4,6 +4,7 @@ import numpy as np
 from perception_helpers import stereo
 
 from suture_bt.geometry import NeedleModel
+from suture_bt.perception.answer_gates import AnswerGates
 from suture_bt.perception.mask_view import MaskView
 from suture_bt.perception.needle_projection import rasterize_needle
 from suture_bt.perception.unseen_arc import (
@@ -178,7 +179,7 @@ def test_localizer_refuses_the_mirror_twin_of_the_held_needle_at_the_task3_start
     loc = NeedleLocalizer(stereo_model, tissue=tissue)
     # The rival gate refuses this twin first (a pose 52 deg away costs 1.16x): off here, so
     # the exposure test is the one that speaks.
-    loc.max_rival_ratio = 0.0
+    loc.gates = AnswerGates(max_rival_ratio=0.0)
     with pytest.raises(NeedleNotFound, match="hidden by nothing"):
         loc.localize(left, right)
     # With the rival gate on, one of the two refuses it (since session 18 keeps the swage band

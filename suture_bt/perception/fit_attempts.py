@@ -11,12 +11,13 @@ among its candidates (:mod:`pose_fit`).
 
 from __future__ import annotations
 
-from dataclasses import dataclass, replace
+from dataclasses import dataclass, field, replace
 
 import numpy as np
 
 from suture_bt.geometry import NeedleModel
 from suture_bt.interfaces import StereoCameraModel
+from suture_bt.perception.answer_gates import MIN_INLIER_FRACTION, AnswerGates
 from suture_bt.perception.base_or_tip import occlusion_radius
 from suture_bt.perception.colour_refine import ColourRule
 from suture_bt.perception.edge_samples import mask_ends
@@ -27,43 +28,11 @@ from suture_bt.perception.needle_projection import end_pixels
 from suture_bt.perception.occlusion import anchored_ends, end_is_occluded, extended_ends
 from suture_bt.perception.pose_fit import NeedleNotFound, PoseFitResult, PoseFitter
 from suture_bt.perception.prior_seeds import seed_poses
-from suture_bt.perception.rival_probe import (
-    MAX_RIVAL_RATIO,
-    MAX_TIE_RATIO,
-    pose_offset,
-    tie_ratio,
-)
+from suture_bt.perception.rival_probe import pose_offset, tie_ratio
 
 #: A keypoint this confident anchors its end even when the other end's keypoint is weak
 #: (then the other end is sought at, and behind, the visible piece's far end).
 STRONG_KEYPOINT_SCORE = 0.5
-#: A final fit whose RMS edge residual exceeds this (px) is refused: over six benchmark sets
-#: (1,200 scenes: 1080p and 480p, unoccluded and occluded, two seeds) every correct fit stayed
-#: at or below 0.40 px, while 20 wrong answers (mirror twins, swaps, 20-60 deg tilts) lay
-#: between 0.45 and 0.6 px.
-MAX_RMS_PX = 0.45
-#: A final fit explaining a smaller share of the edge points (within 1.5 px) is refused: on
-#: the benchmarks every correct answer explained at least 71 % (the retrained network: at
-#: least 79 % on the re-drawn 1080p occluded sets), those below 60 % were a mask of another
-#: object (one was 117 mm off), and the 64-68 % ones there wrong (one 160 deg off).
-MIN_INLIER_FRACTION = 0.7
-#: A final fit whose predicted arc-centre spread (mm) exceeds this is refused: a third of the
-#: 2 mm an answer may be off and still count as right. A far needle's depth rests on its
-#: apparent size (DESIGN.md §5); over the 2021 answers of the session 12-14 report runs the
-#: spread exceeded 0.6 mm three times: a free needle 182 mm away answered 2.07 mm off (0.68),
-#: a mirror twin 15 mm off (0.66) and one right answer (1.32). On the development frames
-#: (seeds 1000 and 6173, 511 right answers) it refuses 4 right ones, 100-182 mm away, two of
-#: them 1.1-1.3 mm off; no wrong answer there exceeded 0.6.
-MAX_POSITION_STD_MM = 0.6
-#: An answer whose end pixels lie farther than this (px) from every end hypothesis the search
-#: started from, though no end was thought hidden and no prior given (those fits search again
-#: from their own ends anyway), is searched again from its own ends over every depth: its
-#: hypotheses were wrong (a keypoint and the mask's far pair both on the arc's bulge, say),
-#: and so may be the basin they led to. Session 25's one wrong answer in 800 (report seed
-#: 27322476, ``unoccluded`` #0: 7.7 mm / 171° off, its ends 20.7 px from the keypoints) is
-#: then answered 0.58 mm / 0.20° off; on the development frames (seeds 6173 and 1000, 800
-#: calls over every set) it never ran, and every answer is the same.
-REFIT_MOVED_PX = 8.0
 
 
 def _same_pair(a, b, tol_px: float = 3.0) -> bool:
@@ -79,22 +48,17 @@ def _same_pair(a, b, tol_px: float = 3.0) -> bool:
 @dataclass
 class FitAttempts:
     """The fit stage (see the module docstring) with the localiser's cameras, model, colour
-    rule and fitter; answers worse than ``max_rms_px`` RMS, explaining less than
-    MIN_INLIER_FRACTION of the edge, looser than ``max_angle_std_deg`` or
-    ``max_position_std_mm``, with a clearly different pose within ``max_rival_ratio`` of
-    their cost (:mod:`rival_probe`), or tied within ``max_tie_ratio`` with any other clearly
-    different candidate of the fit (a final pose or a probe's) are refused."""
+    rule and fitter. An answer outside ``gates`` (:class:`~.answer_gates.AnswerGates`) is
+    refused: worse than its RMS, explaining less than MIN_INLIER_FRACTION of the edge, looser
+    than its angle spread for the priors or its position spread, with a clearly different
+    pose within its rival ratio of the cost (:mod:`rival_probe`), or tied within its tie ratio
+    with any other clearly different candidate of the fit (a final pose or a probe's)."""
 
     stereo: StereoCameraModel
     model: NeedleModel
     rule: ColourRule
     fitter: PoseFitter
-    max_rms_px: float = MAX_RMS_PX
-    max_angle_std_deg: float = 2.0
-    max_rival_ratio: float = MAX_RIVAL_RATIO
-    max_position_std_mm: float = MAX_POSITION_STD_MM
-    max_tie_ratio: float = MAX_TIE_RATIO
-    refit_moved_px: float = REFIT_MOVED_PX
+    gates: AnswerGates = field(default_factory=AnswerGates)
 
     def __call__(
         self, images, views, ends, depth, half_width, previous, kp, score, priors=()
@@ -172,16 +136,23 @@ class FitAttempts:
                 contradicted = exc
             except NeedleNotFound:
                 pass
-        if fit is not None and not (hidden or priors) and fit.ends_moved_px > self.refit_moved_px:
+        moved = fit is not None and fit.ends_moved_px > self.gates.refit_moved_px
+        if moved and not (hidden or priors):
             fit = self._refit_from_own_ends(fit, attempt)
         if fit is None and contradicted is not None:
             raise contradicted
         if fit is None:
             raise NeedleNotFound("no pose explains the needle's outline (every start failed)")
-        if fit.rms_px > self.max_rms_px:
+        self._check(fit, priors)
+        return fit
+
+    def _check(self, fit: PoseFitResult, priors) -> None:
+        """Raise NeedleNotFound, with the reason, when ``fit`` is outside the gates."""
+        g = self.gates
+        if fit.rms_px > g.max_rms_px:
             raise NeedleNotFound(
                 f"the best pose misses the needle's outline by {fit.rms_px:.2f} px RMS "
-                f"(> {self.max_rms_px:.2f}; {100 * fit.inlier_fraction:.0f} % of its edge "
+                f"(> {g.max_rms_px:.2f}; {100 * fit.inlier_fraction:.0f} % of its edge "
                 "explained): too little of the needle is seen clearly",
                 best=fit.T_cam_needle.copy(),
             )
@@ -190,34 +161,33 @@ class FitAttempts:
                 f"the best pose explains only {100 * fit.inlier_fraction:.0f} % of the mask's "
                 f"edge (< {100 * MIN_INLIER_FRACTION:.0f} %): the mask holds something else"
             )
-        limit = self.max_angle_std_deg
+        limit = g.angle_std_limit(priors)
         if fit.angle_std_deg > limit:
             raise NeedleNotFound(
                 f"the seen part leaves the pose loose: predicted angle spread "
                 f"{fit.angle_std_deg:.1f} deg (> {limit:.1f}; position "
                 f"{fit.position_std_mm:.1f} mm): too little of the needle's curve is seen"
             )
-        if fit.position_std_mm > self.max_position_std_mm:
+        if fit.position_std_mm > g.max_position_std_mm:
             raise NeedleNotFound(
                 f"the seen outline leaves the needle's position loose: predicted spread "
-                f"{fit.position_std_mm:.2f} mm (> {self.max_position_std_mm:.2f}; angle "
+                f"{fit.position_std_mm:.2f} mm (> {g.max_position_std_mm:.2f}; angle "
                 f"{fit.angle_std_deg:.1f} deg): too far or too little seen to place it"
             )
-        if fit.rival_offset is not None and fit.rival_ratio <= self.max_rival_ratio:
+        if fit.rival_offset is not None and fit.rival_ratio <= g.max_rival_ratio:
             mm, deg = fit.rival_offset
-            ratio, limit = fit.rival_ratio, self.max_rival_ratio
+            ratio, limit = fit.rival_ratio, g.max_rival_ratio
             raise NeedleNotFound(
                 f"another pose {mm:.1f} mm / {deg:.0f} deg away explains the outline almost as "
                 f"well (cost {ratio:.2f}x the answer's, limit {limit:.2f}): the seen part does "
                 "not pin the pose"
             )
-        if fit.tie_ratio <= self.max_tie_ratio:
+        if fit.tie_ratio <= g.max_tie_ratio:
             raise NeedleNotFound(
                 f"two clearly different poses explain the outline equally well (cost "
-                f"{fit.tie_ratio:.4f}x the answer's, limit {self.max_tie_ratio:.2f}): the seen "
+                f"{fit.tie_ratio:.4f}x the answer's, limit {g.max_tie_ratio:.2f}): the seen "
                 "part is the same arc in both and nothing seen tells them apart"
             )
-        return fit
 
     def _refit_from_own_ends(self, fit: PoseFitResult, attempt) -> PoseFitResult:
         """The cheaper of ``fit`` and a fit from its own end pixels over every depth; a refit

@@ -1,0 +1,123 @@
+"""What the needle network says about a stereo frame: coarse needle masks, end keypoints, which
+keypoints to trust, and a depth hint from their stereo disparity (the localiser's first step).
+"""
+
+from __future__ import annotations
+
+import cv2
+import numpy as np
+import torch
+
+from suture_bt.interfaces import StereoCameraModel
+from suture_bt.perception.needle_masks import MAX_DEPTH, MIN_DEPTH
+from suture_bt.perception.network import OUTPUT_STRIDE, decode_ends
+
+#: A keypoint heatmap peak below this probability is not trusted (the mask's ends are used).
+MIN_KEYPOINT_SCORE = 0.15
+#: Slack on how far apart one needle's two end keypoints can be (its chord seen at MIN_DEPTH).
+MAX_CHORD_MARGIN = 1.2
+#: Base and tip keypoints closer than this (full-resolution px) are not trusted as two ends.
+MIN_END_SEPARATION_PX = 8.0
+
+
+def net_input(rgb: np.ndarray, width: int) -> tuple[np.ndarray, float]:
+    """Area-downsample to ``width`` (aspect kept), pad rows to a multiple of 16; scale."""
+    H, W = rgb.shape[:2]
+    s = width / W
+    h = int(round(H * s))
+    small = cv2.resize(rgb, (width, h), interpolation=cv2.INTER_AREA)
+    hp = int(np.ceil(h / 16) * 16)
+    if hp != h:
+        small = np.concatenate([small, np.zeros((hp - h, width, 3), small.dtype)], 0)
+    return small, s
+
+
+def read_network(net, left: np.ndarray, right: np.ndarray, width: int):
+    """Coarse mask probabilities (2, h, w), keypoints (2 eyes, 2 ends, 2) in full-resolution
+    px, their scores (2, 2), and full px per coarse px; ValueError for a malformed image."""
+    for name, img in (("left", left), ("right", right)):
+        if img is None or img.ndim != 3 or img.shape[2] != 3 or img.size == 0:
+            shape = None if img is None else img.shape
+            raise ValueError(f"{name} image must be H×W×3 RGB, got {shape}")
+    a, s = net_input(left, width)
+    b, _ = net_input(right, width)
+    x = torch.from_numpy(np.stack([a, b])).permute(0, 3, 1, 2).float().div_(255.0)
+    x = x.contiguous(memory_format=torch.channels_last)
+    with torch.inference_mode():
+        # One eye at a time: the same outputs as one batch of both (bitwise), faster on a CPU
+        # (one eye's activations stay in cache: 28 against 36 ms).
+        out = torch.cat([net(x[i : i + 1]) for i in range(len(x))])
+    prob = torch.sigmoid(out[:, 0]).numpy()
+    kp, score = decode_ends(out[:, 1], out[:, 2])
+    kp_full = ((kp + 0.5) * OUTPUT_STRIDE) / s - 0.5
+    return prob, kp_full, score, OUTPUT_STRIDE / s
+
+
+def plausible_scores(
+    kp: np.ndarray,
+    score: np.ndarray,
+    max_apart_px: float,
+    prob: np.ndarray | None = None,
+    scale: float = 1.0,
+    coarse_threshold: float = 0.3,
+) -> np.ndarray:
+    """Scores with one keypoint of an eye zeroed when the two are farther apart than
+    ``max_apart_px`` (the needle's chord at the nearest working distance): one of them then
+    sits on something else, e.g. a jaw tip, and would pick the wrong blob as the needle. The
+    one dropped lies on the smaller blob of the coarse mask ``prob`` (``scale``: full px per
+    coarse px) — a jaw tip is a speck beside the needle's arc — or, on a tie or without
+    ``prob``, is the weaker (development in_port #16 of seed 1000: the stronger, 0.41 against
+    0.17, sat on the other arm's jaw tip)."""
+    out = score.copy()
+    for eye in (0, 1):
+        if out[eye].min() >= MIN_KEYPOINT_SCORE:
+            if np.linalg.norm(kp[eye, 0] - kp[eye, 1]) > max_apart_px:
+                areas = (
+                    None
+                    if prob is None
+                    else blob_areas(prob[eye], kp[eye], scale, coarse_threshold)
+                )
+                if areas is None or areas[0] == areas[1]:
+                    out[eye, int(np.argmin(out[eye]))] = 0.0
+                else:
+                    out[eye, int(np.argmin(areas))] = 0.0
+    return out
+
+
+def blob_areas(prob: np.ndarray, kp: np.ndarray, scale: float, threshold: float) -> np.ndarray:
+    """Area (coarse px) of the coarse mask's blob (``prob`` over ``threshold``) each keypoint
+    (2, 2; full px) lies on (0: on none)."""
+    m = (prob > threshold).astype(np.uint8)
+    _, lab, stats, _ = cv2.connectedComponentsWithStats(m, connectivity=8)
+    out = np.zeros(len(kp))
+    h, w = lab.shape
+    for i, (u, v) in enumerate((np.asarray(kp, float) + 0.5) / scale - 0.5):
+        x, y = int(round(u)), int(round(v))
+        win = lab[max(y - 2, 0) : min(y + 3, h), max(x - 2, 0) : min(x + 3, w)]
+        labels = win[win > 0]
+        if len(labels):
+            out[i] = stats[labels, cv2.CC_STAT_AREA].max()
+    return out
+
+
+def trusted_ends_and_depth(kp: np.ndarray, score: np.ndarray, stereo: StereoCameraModel):
+    """Left (base, tip) pixels when trusted, and a depth hint from their disparity.
+
+    The needle's two ends look alike, so the heads may both fire on one end (then the fit
+    finds the ends from the mask) or swap between the eyes (pairs are matched by row).
+    """
+    if score[0].min() < MIN_KEYPOINT_SCORE:
+        return None, None
+    if np.linalg.norm(kp[0, 0] - kp[0, 1]) < MIN_END_SEPARATION_PX:
+        return None, None
+    ends, depth = (kp[0, 0], kp[0, 1]), None
+    if score[1].min() >= MIN_KEYPOINT_SCORE:
+        right = kp[1]
+        if np.abs(kp[0, :, 1] - right[::-1, 1]).sum() < np.abs(kp[0, :, 1] - right[:, 1]).sum():
+            right = right[::-1]
+        disp = kp[0, :, 0] - right[:, 0]
+        if np.all(disp > 1.0):
+            depth = float(np.mean(stereo.left.fx * stereo.baseline / disp))
+            if not MIN_DEPTH <= depth <= MAX_DEPTH:
+                depth = None  # implausible disparity (ends mismatched between the eyes)
+    return ends, depth

@@ -1,0 +1,43 @@
+"""The answer gates: one frozen object whose defaults are the documented limits, whose angle
+limit follows the priors, and which a caller loosens for one call without changing the
+localiser's own."""
+
+from dataclasses import FrozenInstanceError, replace
+
+import numpy as np
+import pytest
+
+from suture_bt.perception import answer_gates, exposure_gate, rival_probe, spread_limits
+from suture_bt.perception.answer_gates import AnswerGates
+from suture_bt.perception.needle_prior import HeldPrior, PortPrior
+
+
+def test_defaults_are_the_documented_limits():
+    g = AnswerGates()
+    assert g.max_rms_px == answer_gates.MAX_RMS_PX
+    assert g.max_position_std_mm == answer_gates.MAX_POSITION_STD_MM
+    assert g.refit_moved_px == answer_gates.REFIT_MOVED_PX
+    assert g.max_rival_ratio == rival_probe.MAX_RIVAL_RATIO
+    assert g.max_tie_ratio == rival_probe.MAX_TIE_RATIO
+    assert g.max_angle_std_deg == spread_limits.MAX_ANGLE_STD_DEG
+    assert g.max_angle_std_deg_held == spread_limits.MAX_ANGLE_STD_DEG_HELD
+    assert g.max_angle_std_deg_in_tissue == spread_limits.MAX_ANGLE_STD_DEG_IN_TISSUE
+    assert g.max_exposed == exposure_gate.MAX_EXPOSED
+
+
+def test_the_angle_limit_follows_the_priors_and_the_gates_own_values():
+    port = PortPrior("entry 1", np.zeros(3), 0.002)
+    pinned = HeldPrior("psm2", np.zeros(3), spread_limits.HELD_PIN_TOLERANCE)
+    g = AnswerGates(max_angle_std_deg=3.0, max_angle_std_deg_held=5.0)
+    unaided = 3.0 * spread_limits.MAX_ANGLE_STD_DEG_UNAIDED / spread_limits.MAX_ANGLE_STD_DEG
+    assert g.angle_std_limit(()) == pytest.approx(unaided)
+    assert g.angle_std_limit((port,)) == 3.0
+    assert g.angle_std_limit((pinned,)) == 5.0
+
+
+def test_gates_are_frozen_so_loosening_one_call_cannot_leak_into_the_next():
+    g = AnswerGates()
+    with pytest.raises(FrozenInstanceError):
+        g.max_rms_px = 1.0  # type: ignore[misc]
+    loose = replace(g, max_rms_px=1.0)
+    assert loose.max_rms_px == 1.0 and g.max_rms_px == answer_gates.MAX_RMS_PX
