@@ -15,6 +15,7 @@ from suture_bt.perception.needle_prior import HeldPrior, PortPrior
 def test_defaults_are_the_documented_limits():
     g = AnswerGates()
     assert g.max_rms_px == answer_gates.MAX_RMS_PX
+    assert g.min_inlier_fraction == answer_gates.MIN_INLIER_FRACTION
     assert g.max_position_std_mm == answer_gates.MAX_POSITION_STD_MM
     assert g.refit_moved_px == answer_gates.REFIT_MOVED_PX
     assert g.max_rival_ratio == rival_probe.MAX_RIVAL_RATIO

@@ -59,7 +59,7 @@ def test_bad_image_is_a_value_error():
             loc.localize(img, img, previous=bad)
 
 
-def test_shipped_network_localizes_a_rendered_needle(monkeypatch):
+def test_shipped_network_localizes_a_rendered_needle():
     if not DEFAULT_WEIGHTS.is_file():
         pytest.fail(f"shipped weights missing: {DEFAULT_WEIGHTS}")
     from suture_bt.datagen.needle_data import SimScene
@@ -87,10 +87,9 @@ def test_shipped_network_localizes_a_rendered_needle(monkeypatch):
         again = strict.localize(left, right, gates=AnswerGates())
         np.testing.assert_array_equal(again.T_cam_needle, est.T_cam_needle)
         assert strict.gates.max_rms_px == 0.0
-        with monkeypatch.context() as m:  # so is one that explains too little of the mask
-            m.setattr("suture_bt.perception.fit_attempts.MIN_INLIER_FRACTION", 1.01)
-            with pytest.raises(NeedleNotFound, match="holds something else"):
-                NeedleLocalizer(sim.stereo).localize(left, right)
+        with pytest.raises(NeedleNotFound, match="holds something else"):  # and one that
+            # explains too little of the mask
+            strict.localize(left, right, gates=AnswerGates(min_inlier_fraction=1.01))
         T_true = invert(sim.stereo.left.T_world_cam) @ s.T_world_needle
     finally:
         sim.close()

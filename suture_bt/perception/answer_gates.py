@@ -56,6 +56,8 @@ class AnswerGates:
 
     #: The worst final RMS edge residual answered (px).
     max_rms_px: float = MAX_RMS_PX
+    #: The least share of the mask's edge points the answer must explain.
+    min_inlier_fraction: float = MIN_INLIER_FRACTION
     #: The loosest predicted angle spread (deg) answered with priors (scaled down without).
     max_angle_std_deg: float = MAX_ANGLE_STD_DEG
     #: The same when a calibrated held-by prior pins the arc.

@@ -17,7 +17,7 @@ import numpy as np
 
 from suture_bt.geometry import NeedleModel
 from suture_bt.interfaces import StereoCameraModel
-from suture_bt.perception.answer_gates import MIN_INLIER_FRACTION, AnswerGates
+from suture_bt.perception.answer_gates import AnswerGates
 from suture_bt.perception.base_or_tip import occlusion_radius
 from suture_bt.perception.colour_refine import ColourRule
 from suture_bt.perception.edge_samples import mask_ends
@@ -49,7 +49,7 @@ def _same_pair(a, b, tol_px: float = 3.0) -> bool:
 class FitAttempts:
     """The fit stage (see the module docstring) with the localiser's cameras, model, colour
     rule and fitter. An answer outside ``gates`` (:class:`~.answer_gates.AnswerGates`) is
-    refused: worse than its RMS, explaining less than MIN_INLIER_FRACTION of the edge, looser
+    refused: worse than its RMS, explaining less than its share of the edge, looser
     than its angle spread for the priors or its position spread, with a clearly different
     pose within its rival ratio of the cost (:mod:`rival_probe`), or tied within its tie ratio
     with any other clearly different candidate of the fit (a final pose or a probe's)."""
@@ -156,10 +156,10 @@ class FitAttempts:
                 "explained): too little of the needle is seen clearly",
                 best=fit.T_cam_needle.copy(),
             )
-        if fit.inlier_fraction < MIN_INLIER_FRACTION:
+        if fit.inlier_fraction < g.min_inlier_fraction:
             raise NeedleNotFound(
                 f"the best pose explains only {100 * fit.inlier_fraction:.0f} % of the mask's "
-                f"edge (< {100 * MIN_INLIER_FRACTION:.0f} %): the mask holds something else"
+                f"edge (< {100 * g.min_inlier_fraction:.0f} %): the mask holds something else"
             )
         limit = g.angle_std_limit(priors)
         if fit.angle_std_deg > limit:
