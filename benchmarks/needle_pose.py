@@ -379,9 +379,20 @@ def main(argv=None) -> int:
     if args.max_exposed_mm is not None:
         gates = replace(gates, max_exposed=1e-3 * args.max_exposed_mm)
     cfg = BenchmarkRun(
-        args.n, w, h, args.seed, conds, args.phantom, args.light, args.prior, args.exact_priors
+        n=args.n,
+        width=w,
+        height=h,
+        seed=args.seed,
+        sets=conds,
+        phantom=args.phantom,
+        light=args.light,
+        prior=args.prior,
+        exact_priors=args.exact_priors,
+        weights=args.weights,
+        threads=args.threads,
+        gates=gates,
     )
-    res = run(replace(cfg, weights=args.weights, threads=args.threads, gates=gates))
+    res = run(cfg)
     meta = {
         "resolution": [w, h],
         "n": args.n,

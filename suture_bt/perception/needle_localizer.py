@@ -226,13 +226,14 @@ class NeedleLocalizer:
         T_cam, evidence, decided_by = self.base_tip(rule).orient(
             fit.T_cam_needle, (left, right), views, half_width, previous, jaws
         )
-        check_orientation(predicted, self.stereo.left.T_world_cam @ T_cam, decided_by)
-        check_across_jaws(jaws, self.stereo.left.T_world_cam @ T_cam, decided_by)
-        check_held_place(priors, self.stereo.left.T_world_cam @ T_cam, self.model, decided_by)
+        T_world = self.stereo.left.T_world_cam @ T_cam
+        check_orientation(predicted, T_world, decided_by)
+        check_across_jaws(jaws, T_world, decided_by)
+        check_held_place(priors, T_world, self.model, decided_by)
         t4 = time.perf_counter()
         return NeedleEstimate(
             T_cam_needle=T_cam,
-            T_world_needle=self.stereo.left.T_world_cam @ T_cam,
+            T_world_needle=T_world,
             rms_px=fit.rms_px,
             inlier_fraction=fit.inlier_fraction,
             ambiguity=fit.ambiguity,
