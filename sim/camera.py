@@ -20,6 +20,7 @@ import numpy as np
 import pybullet as p
 
 from suture_bt.interfaces import CameraModel, FrameLost, StereoCameraModel, StereoFrame
+from suture_bt.sim.quiet import quiet_fd
 from suture_bt.sim.rendering import MAX_TILE_HEIGHT, MAX_TILE_WIDTH, load_renderer
 from suture_bt.transforms import invert, make_transform, pose_to_transform
 
@@ -183,17 +184,18 @@ def render_view(
             bottom = NEAR * (cam.cy - (r1 - 0.5 + dv)) / cam.fy
             proj = _gl_matrix(_frustum(left, right, bottom, top))
             w, h = c1 - c0, r1 - r0
-            _, _, img, depth, segm = p.getCameraImage(
-                w,
-                h,
-                viewMatrix=view,
-                projectionMatrix=proj,
-                renderer=flag,
-                flags=flags,
-                lightDirection=[float(v) for v in light_direction],
-                shadow=0,
-                physicsClientId=client,
-            )
+            with quiet_fd(1):  # the EGL plugin's banner when it first renders
+                _, _, img, depth, segm = p.getCameraImage(
+                    w,
+                    h,
+                    viewMatrix=view,
+                    projectionMatrix=proj,
+                    renderer=flag,
+                    flags=flags,
+                    lightDirection=[float(v) for v in light_direction],
+                    shadow=0,
+                    physicsClientId=client,
+                )
             rgb[r0:r1, c0:c1] = np.asarray(img, np.uint8).reshape(h, w, 4)[:, :, :3]
             zbuf[r0:r1, c0:c1] = np.asarray(depth, np.float32).reshape(h, w)
             if with_segmentation:

@@ -1,7 +1,10 @@
-"""Import pybullet without the build-time banner it writes to stderr (fd 2) on first import."""
+"""Keep pybullet's C-level banners off the user's terminal: the build-time banner it writes to
+stderr (fd 2) on first import, and the EGL plugin's on stdout (fd 1) when it first renders
+and when it disconnects."""
 
 from __future__ import annotations
 
+import contextlib
 import os
 import sys
 
@@ -17,5 +20,24 @@ def import_pybullet_quietly() -> None:
         import pybullet  # noqa: F401
     finally:
         os.dup2(saved, 2)
+        os.close(saved)
+        os.close(devnull)
+
+
+@contextlib.contextmanager
+def quiet_fd(fd: int):
+    """Silence C-level output on a file descriptor (pybullet plugin banners)."""
+    try:
+        (sys.stdout if fd == 1 else sys.stderr).flush()
+        saved = os.dup(fd)
+    except (OSError, ValueError):
+        yield
+        return
+    devnull = os.open(os.devnull, os.O_WRONLY)
+    try:
+        os.dup2(devnull, fd)
+        yield
+    finally:
+        os.dup2(saved, fd)
         os.close(saved)
         os.close(devnull)

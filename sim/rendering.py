@@ -10,37 +10,18 @@ bodies do so themselves).
 
 from __future__ import annotations
 
-import contextlib
 import os
 import pkgutil
-import sys
 
 import pybullet as p
+
+from suture_bt.sim.quiet import quiet_fd
 
 #: Largest image the EGL plugin renders without upsampling (DESIGN.md §5).
 MAX_TILE_WIDTH = 1024
 MAX_TILE_HEIGHT = 768
 
 _egl_broken = False
-
-
-@contextlib.contextmanager
-def _quiet_stdout():
-    """Silence the plugin's C-level banner on file descriptor 1."""
-    try:
-        sys.stdout.flush()
-        saved = os.dup(1)
-    except (OSError, ValueError):
-        yield
-        return
-    devnull = os.open(os.devnull, os.O_WRONLY)
-    try:
-        os.dup2(devnull, 1)
-        yield
-    finally:
-        os.dup2(saved, 1)
-        os.close(saved)
-        os.close(devnull)
 
 
 def load_renderer(client: int) -> str:
@@ -58,7 +39,7 @@ def load_renderer(client: int) -> str:
     if spec is None:
         _egl_broken = True
         return "tiny"
-    with _quiet_stdout():
+    with quiet_fd(1):
         plugin = p.loadPlugin(spec.get_filename(), "_eglRendererPlugin", physicsClientId=client)
     if plugin < 0:
         _egl_broken = True

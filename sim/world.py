@@ -16,9 +16,6 @@ four entry ports, PSM1 (at +x) the four exit ports, so PSM2 inserts and PSM1 pul
 
 from __future__ import annotations
 
-import contextlib
-import os
-import sys
 from collections.abc import Callable
 from dataclasses import dataclass, field
 
@@ -36,6 +33,7 @@ from suture_bt.sim.joint_servo import JointServo, ServoParams
 from suture_bt.sim.needle_body import NeedleBody
 from suture_bt.sim.phantom_body import PhantomBody
 from suture_bt.sim.psm_body import LINK_JAWS, LINK_TIP, PSMBody
+from suture_bt.sim.quiet import quiet_fd
 from suture_bt.sim.rendering import load_renderer
 from suture_bt.sim.scene import SceneConfig, default_scene
 from suture_bt.sim.simulated_psm import SimulatedPSM
@@ -63,25 +61,6 @@ BOOKKEEPING_TICKS = 4
 GRASP_DEPTH = 0.0015
 #: Jaw angle at which the blades touch a 0.72 mm wire held GRASP_DEPTH behind the tip.
 JAW_ON_NEEDLE = 0.08
-
-
-@contextlib.contextmanager
-def quiet_fd(fd: int):
-    """Silence C-level output on a file descriptor (pybullet plugin banners)."""
-    try:
-        (sys.stdout if fd == 1 else sys.stderr).flush()
-        saved = os.dup(fd)
-    except (OSError, ValueError):
-        yield
-        return
-    devnull = os.open(os.devnull, os.O_WRONLY)
-    try:
-        os.dup2(devnull, fd)
-        yield
-    finally:
-        os.dup2(saved, fd)
-        os.close(saved)
-        os.close(devnull)
 
 
 def psm_base_frame(arm: str) -> np.ndarray:

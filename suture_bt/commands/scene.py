@@ -8,8 +8,9 @@ from pathlib import Path
 import numpy as np
 
 from suture_bt.sim import ground_truth
+from suture_bt.sim.quiet import quiet_fd
 from suture_bt.sim.scene import load_scene
-from suture_bt.sim.world import World, quiet_fd
+from suture_bt.sim.world import World
 from suture_bt.transforms import matrix_to_rpy
 
 

@@ -29,8 +29,9 @@ from suture_bt.runtime.context_factory import build_context
 from suture_bt.runtime.observer import TickRecord, TreeObserver
 from suture_bt.runtime.results import result_document, write_result
 from suture_bt.sim.ground_truth import GroundTruth
+from suture_bt.sim.quiet import quiet_fd
 from suture_bt.sim.scene import SceneConfig, load_scene, scene_from_dict
-from suture_bt.sim.world import World, quiet_fd
+from suture_bt.sim.world import World
 
 #: Simulated time per tick (s): 50 Hz, the rate at which skills decide.
 TICK_DT = 0.02
