@@ -44,6 +44,31 @@ def test_train_few_steps_writes_loadable_weights(tmp_path):
     assert load_network(out).width == 8
 
 
+def test_several_dataset_folders_are_joined_in_order(tmp_path):
+    a, b = tmp_path / "default", tmp_path / "varied"
+    a.mkdir()
+    b.mkdir()
+    _write_dataset(a, n=8, seed=0)
+    _write_dataset(b, n=6, seed=1)
+    joined = load_dataset([a, b])
+    assert joined["images"].shape == (14, 64, 96, 3)
+    assert np.array_equal(joined["keypoints"][8:], load_dataset(b)["keypoints"])
+
+
+def test_train_command_takes_several_folders(tmp_path, capsys):
+    from suture_bt.cli import main
+
+    a, b = tmp_path / "a", tmp_path / "b"
+    a.mkdir()
+    b.mkdir()
+    _write_dataset(a)
+    _write_dataset(b, seed=1)
+    out = tmp_path / "two.pt"
+    args = ["train", "needle", "--data", str(a), str(b), "--out", str(out), "--steps", "2"]
+    assert main(args) == 0
+    assert '"train_images": ' in capsys.readouterr().out and out.is_file()
+
+
 def test_missing_dataset_is_a_clear_error(tmp_path):
     with pytest.raises(FileNotFoundError, match="suture-bt data needle"):
         load_dataset(tmp_path)

@@ -1,4 +1,4 @@
-"""``suture-bt train TARGET [--data DIR] [--out PATH]``: train a network from a dataset folder.
+"""``suture-bt train TARGET [--data DIR ...] [--out PATH]``: train a network from dataset folders.
 
 Targets live in :data:`TARGETS` (name → ``fn(args) -> result dict``), each registered by
 ``@target(name)`` on its function.
@@ -29,21 +29,29 @@ def _needle(args) -> dict:
         cfg.minutes = args.minutes
     cfg.threads = args.threads
     out = Path(args.out) if args.out else DEFAULT_WEIGHTS
-    return train(Path(args.data or DEFAULT_DATA["needle"]), out, cfg) | {"weights": str(out)}
+    folders = [Path(f) for f in (args.data or [DEFAULT_DATA["needle"]])]
+    return train(folders, out, cfg) | {"weights": str(out)}
 
 
 @target("calibration")
 def _calibration(args) -> dict:
     from suture_bt.calibration.training import train_calibration
 
-    data = args.data or DEFAULT_DATA["calibration"]
+    if args.data and len(args.data) > 1:
+        raise SystemExit("suture-bt train calibration: give one --data folder")
+    data = args.data[0] if args.data else DEFAULT_DATA["calibration"]
     return train_calibration(data, args.out, seed=args.seed, steps=args.steps, minutes=args.minutes)
 
 
 def register(subparsers) -> None:
     summary = "train a network on a simulated dataset"
     p = add_target_command(subparsers, "train", summary, TARGETS, "which network", run)
-    p.add_argument("--data", metavar="DIR", help="dataset folder (default: data/<target>)")
+    p.add_argument(
+        "--data",
+        metavar="DIR",
+        nargs="+",
+        help="dataset folder(s), joined (default: data/<target>; calibration takes one)",
+    )
     p.add_argument("--out", metavar="PATH", help="weights file (default: the packaged weights)")
     p.add_argument("--seed", type=int, default=0, help="random seed (default 0)")
     p.add_argument("--steps", type=int, help="maximum number of updates")

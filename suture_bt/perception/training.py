@@ -11,6 +11,7 @@ from __future__ import annotations
 
 import json
 import time
+from collections.abc import Sequence
 from dataclasses import asdict, dataclass
 from pathlib import Path
 
@@ -44,9 +45,15 @@ class TrainConfig:
     threads: int = 1
 
 
-def load_dataset(folder: Path) -> dict[str, np.ndarray]:
-    """All ``shard_*.npz`` of a dataset folder, concatenated."""
-    return load_shards(folder, "shard_*.npz", "suture-bt data needle")
+def load_dataset(folders: Path | Sequence[Path]) -> dict[str, np.ndarray]:
+    """All ``shard_*.npz`` of one dataset folder or several (e.g. the default scenes and the
+    varied ones), concatenated in the order given; stereo pairs stay adjacent."""
+    if isinstance(folders, (str, Path)):
+        folders = [folders]
+    parts = [load_shards(f, "shard_*.npz", "suture-bt data needle") for f in folders]
+    if len(parts) == 1:
+        return parts[0]
+    return {k: np.concatenate([p[k] for p in parts]) for k in parts[0]}
 
 
 def heatmap_targets(kp: np.ndarray, vis: np.ndarray, h: int, w: int) -> np.ndarray:
@@ -180,8 +187,11 @@ def evaluate(net: NeedleNet, data: dict, idx: np.ndarray) -> dict:
     }
 
 
-def train(data_dir: Path, out_path: Path, cfg: TrainConfig, progress: bool = True) -> dict:
-    """Train from scratch and write the weights; return the final metrics and timing."""
+def train(
+    data_dir: Path | Sequence[Path], out_path: Path, cfg: TrainConfig, progress: bool = True
+) -> dict:
+    """Train from scratch on one dataset folder or several and write the weights; return the
+    final metrics and timing."""
     t0 = time.time()
     torch.manual_seed(cfg.seed)
     torch.set_num_threads(cfg.threads)
