@@ -74,6 +74,7 @@ from suture_bt.perception.spread_limits import (  # noqa: F401 - the limits, re-
     MAX_ANGLE_STD_DEG_UNAIDED,
     check_spread_in_tissue,
 )
+from suture_bt.perception.stray_pieces import stray_pieces, without
 
 #: The fit searches no nearer than this share of the nearest stereo depth (keypoints', masks').
 NEAR_SLACK = 0.7
@@ -118,6 +119,9 @@ class NeedleLocalizer:
         self.tissue = tissue
         self.input_width = INPUT_SIZE[0]
         self.coarse_threshold = 0.3
+        #: Whether an answer that runs through a mask piece it does not explain as wire is
+        #: fitted again without it (:mod:`~suture_bt.perception.stray_pieces`).
+        self.drop_stray_pieces = True
         #: The last call's network output (coarse probabilities, scale), kept whether or not
         #: it answered: a refusal still says where in the images needle was seen.
         self.last_network: tuple[np.ndarray, float] | None = None
@@ -211,6 +215,8 @@ class NeedleLocalizer:
             previous = self.stereo.left.T_cam_world @ np.asarray(predicted[0].T_world_needle)
         attempts = FitAttempts(self.stereo, self.model, rule, self.fitter, gates)
         fit = attempts((left, right), views, ends, depth, half_width, previous, kp, score, priors)
+        inputs = (ends, depth, half_width, previous, kp, score, priors)
+        views, fit = self._without_stray_pieces((left, right), views, fit, attempts, inputs)
         check_spread_in_tissue(
             fit.T_world_needle,
             fit.angle_std_deg,
@@ -253,6 +259,31 @@ class NeedleLocalizer:
             priors=priors,
             exposure=exposure,
         )
+
+    def _without_stray_pieces(self, images, views, fit, attempts, inputs):
+        """The views and fit again without the mask pieces the answer runs through but does
+        not explain as wire (:mod:`stray_pieces`: a jaw's blade taken for wire); unchanged
+        when there are none. A refusal of the refit says which pieces were dropped."""
+        if not self.drop_stray_pieces:
+            return views, fit
+        cut = self.fitter.tissue_cut(inputs[-1])
+        stray = [
+            stray_pieces(img, view, eye, fit.T_cam_needle, self.stereo, self.model, cut)
+            for eye, (img, view) in enumerate(zip(images, views, strict=True))
+        ]
+        if not any(s.any() for s in stray):
+            return views, fit
+        views = tuple(without(v, s) for v, s in zip(views, stray, strict=True))
+        try:
+            return views, attempts(images, views, *inputs)
+        except NeedleNotFound as exc:
+            px = " and ".join(str(int(s.sum())) for s in stray)
+            exc.reason = (
+                f"without mask pieces the first answer ran through but did not explain as "
+                f"wire ({px} px, left and right: a jaw's blade?): {exc.reason}"
+            )
+            exc.args = (exc.reason,)
+            raise
 
     def seen_pixels(self, image_height: int) -> tuple[np.ndarray, np.ndarray]:
         """Full-resolution pixels (N×2, u v) where the last call's network saw needle, per

@@ -349,6 +349,14 @@ class PoseFitter:
             ends_moved_px=ends_moved(np.asarray(end_pixels(cam, T, self.model)), tried),
         )
 
+    def tissue_cut(self, priors: Sequence[NeedlePrior] = ()) -> TissueCut:
+        """Where the tissue hides the arc for a fit with these priors: the known solid (if
+        given) and the port priors' planes; what the final answer's edge rays measure to."""
+        ports = port_planes(priors)
+        if self.tissue_solid:
+            return self._with_solid(ports)
+        return TissueCut.from_ports(ports, self.stereo.left.T_cam_world, self.model)
+
     def _with_solid(self, ports) -> TissueCut:
         """The cut of the port priors' planes (depth 0) and the known solid's pieces (each
         ``solid_depth`` deep)."""
