@@ -13,9 +13,9 @@ pieces of the true needle: 95 % of medians below 0.25 px). A piece farther than
 :data:`MAX_STRAY_MEDIAN_PX` from the answer is not one the answer passes through: the robust
 loss already ignores it. On 2,368 cached development calls (every set of seeds 6173 and 1000,
 the `in_port` and `occluded` runs of 3131, 6289076 and 11493571, held-out seeds 98013534 and
-22893573, and the studied wrong answers of sessions 26-32) the refit ran on 13 calls: 5 wrong
-answers became 3 right ones and 2 refusals, 1 right answer became a refusal (a rival), 7
-stayed right (within 0.1 deg).
+22893573, and the studied wrong answers of sessions 26-32) it changed 11 answers: 5 wrong
+ones became 3 right ones and 2 refusals, 1 right one a refusal (a rival), 5 stayed right
+(within 0.1 deg).
 """
 
 from __future__ import annotations
