@@ -1,6 +1,7 @@
 """Regressor training on projected keypoints: data follow the offset model; a short run learns."""
 
 import numpy as np
+import pytest
 
 from suture_bt.calibration.calibration_pose import CALIBRATION_JAW, OFFSET_BOUND
 from suture_bt.calibration.jaw_keypoints import project_keypoints
@@ -53,3 +54,15 @@ def test_shipped_regressor_meets_the_accuracy_target_on_projected_keypoints():
         pred = reg.predict(arm, noisy(d.pixels, rng, 1.0), 1920, 1080, d.q_meas)
         err = np.abs(pred - d.offsets) / np.array([np.pi / 180, np.pi / 180, 1e-3])
         assert np.all(err.mean(0) < 0.1), err.mean(0)  # (deg, deg, mm); target 0.2
+
+
+def test_a_missing_dataset_fails_before_anything_is_trained_or_written(tmp_path):
+    """`suture-bt train calibration --data <typo>` used to train the regressor, save it over
+    the packaged one, and only then fail on the missing windows."""
+    from suture_bt.calibration.training import train_calibration
+
+    out = tmp_path / "weights"
+    out.mkdir()
+    with pytest.raises(FileNotFoundError, match="suture-bt data calibration"):
+        train_calibration(tmp_path / "no_such_folder", out, progress=False)
+    assert not any(out.iterdir())

@@ -296,11 +296,13 @@ def train_calibration(
     from suture_bt.calibration.offset_regressor import WEIGHTS_PATH as REG_PATH
 
     folder = Path(out_dir) if out_dir else REG_PATH.parent
+    # The dataset first: a wrong folder is an error before anything is trained or written
+    # (it used to overwrite the packaged regressor and then fail).
+    data = load_windows(data_dir)
     # One thread: with the CPU shared, two intra-op threads ran 10-30× slower (measured).
     torch.set_num_threads(1)
     reg = train_regressor(20000, seed=seed, epochs=60, progress=progress)
     reg.save(folder / REG_PATH.name)
-    data = load_windows(data_dir)
     n_val = min(VALIDATION_WINDOWS, data["images"].shape[0] // 5)
     train = {k: v[: len(v) - n_val] for k, v in data.items()}
     det = train_keypoint_detector(
