@@ -18,16 +18,17 @@ T = make_transform(Rotation.from_euler("x", 30, degrees=True).as_matrix(), (0.0,
 GREY, VIOLET = (150, 150, 150), (140, 60, 190)
 
 
-def _scene(blob_offset_px: float, blob_colour=GREY):
-    """The left image and mask view: the needle cut in two by a 13 px gap (a jaw across it),
-    and in the gap a 5×5 px blob whose centre is ``blob_offset_px`` outside the arc (the lit
-    edge of that jaw's blade, taken for wire)."""
-    cam = STEREO.left
-    mask = rasterize_needle(cam, T, MODEL)
-    arc = project_cam(cam, MODEL.centerline(41) @ T[:3, :3].T + T[:3, 3])
+def _scene(blob_offset_px: float, blob_colour=GREY, eye: int = 0):
+    """One eye's image and mask view (``eye`` 0 left, 1 right): the needle cut in two by a
+    13 px gap (a jaw across it), and in the gap a 5×5 px blob whose centre is
+    ``blob_offset_px`` outside the arc (the lit edge of that jaw's blade, taken for wire)."""
+    cam = (STEREO.left, STEREO.right)[eye]
+    T_eye = cam.T_cam_world @ STEREO.left.T_world_cam @ T
+    mask = rasterize_needle(cam, T_eye, MODEL)
+    arc = project_cam(cam, MODEL.centerline(41) @ T_eye[:3, :3].T + T_eye[:3, 3])
     u, v = np.round(arc[12]).astype(int)
     mask[v - 6 : v + 7, u - 6 : u + 7] = False  # the gap
-    centre = project_cam(cam, T[:3, 3][None])[0]
+    centre = project_cam(cam, T_eye[:3, 3][None])[0]
     out = (arc[12] - centre) / np.linalg.norm(arc[12] - centre)
     bu, bv = np.round(arc[12] + out * blob_offset_px).astype(int)
     mask[bv - 2 : bv + 3, bu - 2 : bu + 3] = True
@@ -59,14 +60,11 @@ def test_a_violet_blob_is_the_band_and_a_far_blob_is_ignored():
 
 
 def test_the_right_eye_is_judged_with_its_own_rays():
-    cam = STEREO.right
-    T_right = cam.T_cam_world @ STEREO.left.T_world_cam @ T
-    mask = rasterize_needle(cam, T_right, MODEL)
-    view = MaskView(mask)
-    rgb = np.zeros((*mask.shape, 3), np.uint8)
-    assert not stray_pieces(rgb, view, 1, T, STEREO, MODEL, None).any()
-    # Judged as a left-eye view the same mask is 2 mm of baseline off: still one piece.
-    assert piece_labels(view)[0] == 2
+    rgb, view = _scene(blob_offset_px=3.0, eye=1)
+    assert stray_pieces(rgb, view, 1, T, STEREO, MODEL, None).sum() == 25
+    # Taken for a left view, the whole outline is the 4 mm baseline's ~30 px of disparity off
+    # the answer: nothing is near enough to be judged.
+    assert not stray_pieces(rgb, view, 0, T, STEREO, MODEL, None).any()
 
 
 def test_without_takes_the_pieces_out_and_marks_them_as_occluder():
