@@ -9,21 +9,6 @@ import os
 import sys
 
 
-def import_pybullet_quietly() -> None:
-    """Import pybullet with its banner suppressed; a no-op once it is imported."""
-    if "pybullet" in sys.modules:
-        return
-    sys.stderr.flush()
-    saved, devnull = os.dup(2), os.open(os.devnull, os.O_WRONLY)
-    try:
-        os.dup2(devnull, 2)
-        import pybullet  # noqa: F401
-    finally:
-        os.dup2(saved, 2)
-        os.close(saved)
-        os.close(devnull)
-
-
 @contextlib.contextmanager
 def quiet_fd(fd: int):
     """Silence C-level output on a file descriptor (pybullet plugin banners)."""
@@ -41,3 +26,11 @@ def quiet_fd(fd: int):
         os.dup2(saved, fd)
         os.close(saved)
         os.close(devnull)
+
+
+def import_pybullet_quietly() -> None:
+    """Import pybullet with its banner suppressed; a no-op once it is imported."""
+    if "pybullet" in sys.modules:
+        return
+    with quiet_fd(2):
+        import pybullet  # noqa: F401

@@ -8,7 +8,12 @@ from scipy.spatial.transform import Rotation
 from suture_bt.geometry import NeedleModel
 from suture_bt.perception.mask_view import MaskView, edge_points
 from suture_bt.perception.needle_projection import project_cam, rasterize_needle
-from suture_bt.perception.stray_pieces import piece_labels, stray_pieces, without
+from suture_bt.perception.stray_pieces import (
+    edge_point_labels,
+    piece_labels,
+    stray_pieces,
+    without,
+)
 from suture_bt.transforms import make_transform
 
 MODEL = NeedleModel()
@@ -43,7 +48,7 @@ def _scene(blob_offset_px: float, blob_colour=GREY, eye: int = 0):
 
 def test_a_blob_beside_the_arc_is_stray_and_the_needles_own_pieces_are_not():
     rgb, view = _scene(blob_offset_px=3.0)
-    n, lab, _ = piece_labels(view)
+    n, lab = piece_labels(view)
     assert n - 1 == 3  # two pieces of wire and the blob
     stray = stray_pieces(rgb, view, 0, T, STEREO, MODEL, None)
     assert stray.sum() == 25 and len(np.unique(lab[stray])) == 1
@@ -78,5 +83,6 @@ def test_without_takes_the_pieces_out_and_marks_them_as_occluder():
 
 def test_edge_points_are_labelled_by_their_own_piece():
     _, view = _scene(3.0)
-    n, lab, point_lab = piece_labels(view)
+    n, lab = piece_labels(view)
+    point_lab = edge_point_labels(lab, edge_points(view), view.origin)
     assert point_lab.min() >= 1 and set(np.unique(point_lab)) == set(range(1, n))

@@ -30,6 +30,7 @@ from suture_bt.interfaces import StereoCameraModel
 from suture_bt.perception.colour_refine import BAND_PIXEL_SCORE, violet_score
 from suture_bt.perception.edge_residuals import edge_rays, residuals
 from suture_bt.perception.mask_view import MaskView, edge_points
+from suture_bt.perception.occlusion import BAND_PIECE_SHARE
 from suture_bt.perception.tissue_cut import TissueCut
 
 #: A piece with a median edge residual (px) above this is not explained as wire...
@@ -38,22 +39,25 @@ MIN_STRAY_MEDIAN_PX = 0.45
 MAX_STRAY_MEDIAN_PX = 3.0
 #: Pieces with fewer edge points than this are not judged (specks).
 MIN_PIECE_EDGE_POINTS = 8
-#: A piece with at least this share of violet pixels is the swage band, never stray.
-BAND_PIECE_SHARE = 0.5
 
 
-def piece_labels(view: MaskView) -> tuple[int, np.ndarray, np.ndarray]:
-    """(number of labels, label image, label of each edge point of :func:`edge_points`)."""
-    n, lab = cv2.connectedComponents(view.mask.astype(np.uint8), connectivity=8)
-    pts = edge_points(view) - np.asarray(view.origin, float)
+def piece_labels(view: MaskView) -> tuple[int, np.ndarray]:
+    """(number of labels, label image) of the view's 8-connected mask pieces (0: no mask)."""
+    return cv2.connectedComponents(view.mask.astype(np.uint8), connectivity=8)
+
+
+def edge_point_labels(lab: np.ndarray, points: np.ndarray, origin) -> np.ndarray:
+    """The piece label of each edge point (full-image u, v; :func:`edge_points`) of a view
+    whose label image is ``lab`` and whose top-left pixel is ``origin``."""
+    pts = points - np.asarray(origin, float)
     h, w = lab.shape
-    point_lab = np.zeros(len(pts), int)
+    out = np.zeros(len(pts), int)
     # An edge point is the midpoint of an in/out pixel pair: the in pixel is one of the two.
     for rounding in (np.floor, np.ceil):
         x = np.clip(rounding(pts[:, 0]).astype(int), 0, w - 1)
         y = np.clip(rounding(pts[:, 1]).astype(int), 0, h - 1)
-        point_lab = np.where(point_lab == 0, lab[y, x], point_lab)
-    return n, lab, point_lab
+        out = np.where(out == 0, lab[y, x], out)
+    return out
 
 
 def stray_pieces(
@@ -70,10 +74,11 @@ def stray_pieces(
     camera) passes near but does not explain as wire (median residual between
     :data:`MIN_STRAY_MEDIAN_PX` and :data:`MAX_STRAY_MEDIAN_PX`)."""
     out = np.zeros(view.mask.shape, bool)
-    n, lab, point_lab = piece_labels(view)
+    n, lab = piece_labels(view)
     if n <= 2:
         return out
     pts = edge_points(view)
+    point_lab = edge_point_labels(lab, pts, view.origin)
     none = np.zeros((0, 2))
     rays = edge_rays(stereo, pts, none) if eye == 0 else edge_rays(stereo, none, pts)
     rays.cut = cut

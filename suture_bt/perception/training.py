@@ -48,12 +48,7 @@ class TrainConfig:
 def load_dataset(folders: Path | Sequence[Path]) -> dict[str, np.ndarray]:
     """All ``shard_*.npz`` of one dataset folder or several (e.g. the default scenes and the
     varied ones), concatenated in the order given; stereo pairs stay adjacent."""
-    if isinstance(folders, (str, Path)):
-        folders = [folders]
-    parts = [load_shards(f, "shard_*.npz", "suture-bt data needle") for f in folders]
-    if len(parts) == 1:
-        return parts[0]
-    return {k: np.concatenate([p[k] for p in parts]) for k in parts[0]}
+    return load_shards(folders, "shard_*.npz", "suture-bt data needle")
 
 
 def heatmap_targets(kp: np.ndarray, vis: np.ndarray, h: int, w: int) -> np.ndarray:
