@@ -6,7 +6,7 @@ import numpy as np
 from perception_helpers import pose_errors
 from test_pose_fit import MODEL, _scene_1080p
 
-from suture_bt.perception.answer_probes import answer_probes, probed
+from suture_bt.perception.answer_probes import answer_probes, probed, wide_redescent
 from suture_bt.perception.edge_residuals import edge_rays
 from suture_bt.perception.mask_view import edge_points
 from suture_bt.perception.needle_projection import params_to_pose, pose_to_params
@@ -52,3 +52,16 @@ def test_an_answer_that_is_the_needles_twin_is_replaced_by_the_needle():
     assert pos < 0.3 and ang < 1.0
     assert np.isfinite(cost[b])
     assert near[b]  # the rival probe ran from the new answer, which its rivals sit around
+
+
+def test_the_wide_redescent_takes_an_answer_slid_along_its_circle_back_to_the_needle():
+    st, T, left, right, _ = _scene_1080p(5, 0.0)
+    rays = edge_rays(st, edge_points(left), edge_points(right))
+    slid = slide_starts(T, MODEL)[1]  # 8 deg along the circle
+    assert pose_errors(slid, T)[1] > 7.0
+    x_slid = pose_to_params(slid[None], st.left, MODEL)[0]
+    fitter = PoseFitter(st, MODEL)
+    x, cost = wide_redescent(fitter, x_slid, FitRays(rays, rays, rays), [])
+    pos, ang = pose_errors(params_to_pose(x, st.left, MODEL)[0], T)
+    assert pos < 0.3 and ang < 1.0
+    assert np.isfinite(cost[0])

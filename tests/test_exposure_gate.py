@@ -21,7 +21,7 @@ def _twin_scene():
     st, T, occ, short, kw = _twin_case()
     _, _, left, right, _ = _scene_1080p(10, 0.0)
     images = _images_with_cover(st, (left, right), occ, px=2)
-    fitter = PoseFitter(st, MODEL, probe_near=False, probe_twin=False)
+    fitter = PoseFitter(st, MODEL, probe_near=False, probe_twin=False, probe_wide=False)
     twin = fitter.fit(*occ, short, **kw).T_cam_needle
     return st, T, twin, images, tuple(occ)
 

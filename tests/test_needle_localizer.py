@@ -249,13 +249,14 @@ def test_a_keypoint_on_the_arcs_bulge_does_not_lead_to_a_confident_mirror_answer
     ends 18 px apart in the image, its bulge 43 px across. The base keypoint sat on the
     bulge's far extreme, the mask's far pair too, and stereo said 136 mm: the answer was
     7.7 mm / 171° off, passing every gate. Its ends had moved 20.7 px from every hypothesis;
-    refit from them it is the needle."""
+    refit from them it is the needle (since session 34 the wide re-descent reaches it too)."""
     stereo_model, left, right, T, _, tissue = task_scene("unoccluded", 0, seed=27322476)
     loc = NeedleLocalizer(stereo_model, tissue=tissue)
     est = loc.localize(left, right)
     pos, ang = pose_errors(est.T_cam_needle, T)
     assert pos < 1.0 and ang < 1.0  # 0.58 mm / 0.20 deg
     loc.gates = AnswerGates(refit_moved_px=float("inf"))
+    loc.fitter.probe_wide = False
     est = loc.localize(left, right)
     assert pose_errors(est.T_cam_needle, T)[1] > 90.0  # the old answer, for the record
 
@@ -301,3 +302,17 @@ def test_a_jaw_blade_beside_the_needle_does_not_make_a_confident_wrong_answer():
     loc.drop_stray_pieces = False
     est = loc.localize(left, right)
     assert pose_errors(est.T_cam_needle, T)[1] > 30.0  # the old answer, for the record
+
+
+def test_an_answer_in_a_narrow_basin_is_descended_again_from_the_searchs_wide_stage():
+    """Development seed 93896709, ``held_start`` #37 without priors: the needle in PSM2's jaw
+    at the Task 3 start. The search's answer sat in a narrow basin 20 mm / 176 deg off that
+    no probe left (each descends at 1 px); taken back through the search's own 3 px stage
+    (``answer_probes.wide_redescent``), it reaches the needle."""
+    stereo_model, left, right, T, _, tissue = task_scene("held_start", 37, seed=93896709)
+    loc = NeedleLocalizer(stereo_model, tissue=tissue)
+    pos, ang = pose_errors(loc.localize(left, right).T_cam_needle, T)
+    assert pos < 0.5 and ang < 1.0  # 0.05 mm / 0.27 deg
+    loc.fitter.probe_wide = False
+    est = loc.localize(left, right)
+    assert pose_errors(est.T_cam_needle, T)[1] > 90.0  # the old answer, for the record

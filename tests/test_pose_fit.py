@@ -190,9 +190,9 @@ def test_final_candidates_are_clearly_different_solutions(n_final):
     which may bring them a little closer), and the ambiguity is the cost gap to the nearest."""
     st, T, left, right, ends = _scene_1080p(4, 0.0)
     occ, short, _ = _tip_hidden(st, T, left, right, ends)
-    res = PoseFitter(st, MODEL, n_final=n_final, probe_rivals=False, probe_near=False).fit(
-        *occ, short
-    )
+    res = PoseFitter(
+        st, MODEL, n_final=n_final, probe_rivals=False, probe_near=False, probe_wide=False
+    ).fit(*occ, short)
     assert len(res.candidates) == n_final
     for i, a in enumerate(res.candidates):
         for b in res.candidates[i + 1 :]:

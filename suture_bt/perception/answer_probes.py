@@ -1,10 +1,11 @@
 """The polished answer probed for a cheaper pose or a near-equal rival (:mod:`rival_probe`).
 
 The fit's answer is the cheapest polished final, but the search's starts may all have missed
-the needle's own basin. Four probes descend from the answer: its depth-mirror twin with the
+the needle's own basin. First the answer is taken back through the search's own wide stage
+(:func:`wide_redescent`), then four probes descend from it: its depth-mirror twin with the
 same end pixels, slides along its own circle (when an end is hidden), small turns, and the
-rival probe. The first three replace the answer when they find a cheaper pose (they are never
-its rivals); the rival probe's poses are kept as rivals, which the refusal gates weigh.
+rival probe. All but the rival probe replace the answer when they find a cheaper pose (they are
+never its rivals); the rival probe's poses are kept as rivals, which the refusal gates weigh.
 """
 
 from __future__ import annotations
@@ -14,6 +15,7 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 
+from suture_bt.perception.fit_solver import levenberg_marquardt
 from suture_bt.perception.needle_prior import choose_answer
 from suture_bt.perception.rival_probe import (
     FitRays,
@@ -29,6 +31,31 @@ if TYPE_CHECKING:
 
 #: Starts carried to the mid stage, and to the full polish, by the slide and near probes.
 SMALL_PROBE = {"n_mid": 2, "n_polish": 1}
+#: Robust scale (px) of the wide re-descent's first stage: the search's own first stage.
+#: The probes descend at 1 px, where an answer slid a few degrees along its circle sits in a
+#: basin of its own; at 3 px that basin merges with the needle's. Found on session 34's
+#: held-out report seed 30513549 (`held_start` #33 without priors: a held needle 33 mm away
+#: answered 7.0 deg slid along its circle, at 1.76x the needle's cost; warm-started from the
+#: answer, or from it slid by up to 16 deg either way, the fit found the needle; the slide
+#: probe did not). On 2,368 cached development calls it changed 9 answers: 2 wrong ones right
+#: (5.2 and 6.2 deg off before, 3.7 and 2.3 after), 5 right ones nearer (0.4-3.0 deg before,
+#: 0.02-2.5 after), 2 right ones a little farther (0.7 -> 1.0 and 1.4 -> 1.7 deg).
+WIDE_SIGMA_PX = 3.0
+#: LM iterations of the wide re-descent's three stages (the search's own: ``PoseFitter``).
+WIDE_ITERATIONS = (8, 8, 6)
+
+
+def wide_redescent(fitter: PoseFitter, x_answer, rays: FitRays, polish: list):
+    """The answer (parameters ``x_answer``) descended again through the search's stages: the
+    coarse edge subset at WIDE_SIGMA_PX, the mid one at 1 px, then the polish (its loss and
+    ``polish`` terms): (parameters (1, 6), cost (1,), inf out of the working range)."""
+    it1, it2, it3 = WIDE_ITERATIONS
+    stereo, model = fitter.stereo, fitter.model
+    x = np.asarray(x_answer, float)[None]
+    x, _ = levenberg_marquardt(x, rays.coarse, stereo, model, it1, WIDE_SIGMA_PX, polish)
+    x, _ = levenberg_marquardt(x, rays.mid, stereo, model, it2, 1.0, polish)
+    x, c = levenberg_marquardt(x, rays.all, stereo, model, it3, 1.0, polish, fitter.final_loss)
+    return x, np.where(fitter.in_range(x), c, np.inf)
 
 
 def answer_probes(fitter: PoseFitter, hidden_end: bool) -> list[RivalProbe]:
@@ -53,17 +80,37 @@ def probed(
     fitter: PoseFitter, xf, cf, chosen, rays: FitRays, polish: list, priors, hidden_end: bool
 ):
     """The polished finals (parameters ``xf``, costs ``cf``; ``chosen`` = the answer's index,
-    prior-consistent rows, prior misses) with the probes' poses added: (x, cost, answer index,
-    prior-consistent, prior misses, which rows are rivals of the answer).
+    prior-consistent rows, prior misses) with the probes' and the wide re-descent's poses
+    added: (x, cost, answer index, prior-consistent, prior misses, which rows are rivals of
+    the answer). When the wide re-descent replaces the probed answer, the probes run again
+    from the new one (its rivals are then probed around it)."""
+    probes = answer_probes(fitter, hidden_end)
+    near = np.zeros(len(xf), bool)
+    xf, cf, b, ok, misses, near = _probe_round(
+        fitter, probes, xf, cf, chosen, near, rays, polish, priors
+    )
+    if fitter.probe_wide:
+        xw, cw = wide_redescent(fitter, xf[b], rays, polish)
+        if cw[0] < cf[b]:  # a cheaper pose only
+            xf, cf = np.concatenate([xf, xw]), np.concatenate([cf, cw])
+            near = np.concatenate([near, [False]])
+            chosen = choose_answer(fitter.world_poses(xf), cf, priors, fitter.model)
+            xf, cf, b, ok, misses, near = _probe_round(
+                fitter, probes, xf, cf, chosen, near, rays, polish, priors
+            )
+    return xf, cf, b, ok, misses, near
+
+
+def _probe_round(fitter: PoseFitter, probes, xf, cf, chosen, near, rays: FitRays, polish, priors):
+    """``probes`` run from the ``chosen`` answer (index, prior-consistent rows, misses):
+    (x, cost, answer index, prior-consistent, prior misses, rivals) with their poses added.
 
     Each probe starts from the answer the probes before it left, so all of them descend
-    together from the polished answer and a probe is run again only after an earlier one has
-    moved it (the same results with one descent per stage instead of four)."""
-    b, ok, misses = chosen
-    probes = answer_probes(fitter, hidden_end)
+    together from the answer and a probe is run again only after an earlier one has moved it
+    (the same results with one descent per stage instead of four)."""
     rivals = probes[-1] if fitter.probe_rivals else None
     loss = fitter.final_loss
-    near = np.zeros(len(xf), bool)
+    b, ok, misses = chosen
     start = xf[b].copy()
     results = probe_together(probes, [start] * len(probes), rays, polish, loss)
     for i, probe in enumerate(probes):
