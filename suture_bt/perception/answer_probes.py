@@ -37,9 +37,9 @@ SMALL_PROBE = {"n_mid": 2, "n_polish": 1}
 #: held-out report seed 30513549 (`held_start` #33 without priors: a held needle 33 mm away
 #: answered 7.0 deg slid along its circle, at 1.76x the needle's cost; warm-started from the
 #: answer, or from it slid by up to 16 deg either way, the fit found the needle; the slide
-#: probe did not). On 2,368 cached development calls it changed 9 answers: 2 wrong ones right
-#: (5.2 and 6.2 deg off before, 3.7 and 2.3 after), 5 right ones nearer (0.4-3.0 deg before,
-#: 0.02-2.5 after), 2 right ones a little farther (0.7 -> 1.0 and 1.4 -> 1.7 deg).
+#: probe did not). On 2,368 cached development calls it changed 12 answers: 3 wrong ones right
+#: (176, 6.2 and 5.2 deg off before; 0.27, 0.01 and 3.0 after), 1 refusal right, 4 right ones
+#: nearer, 3 right ones a little farther (at most 1.4 -> 1.7 deg), 1 wrong one still wrong.
 WIDE_SIGMA_PX = 3.0
 #: LM iterations of the wide re-descent's three stages (the search's own: ``PoseFitter``).
 WIDE_ITERATIONS = (8, 8, 6)
