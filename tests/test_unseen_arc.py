@@ -124,7 +124,7 @@ def test_the_mirror_twin_of_a_needle_behind_a_jaw_runs_over_background():
     imgs = _images_with_cover(st, (left, right), occ, px=2)
     # The twin the fit answers without its rival probe (with it, the fit moves to a cheaper
     # twin 18 mm / 132 deg off that exposes 5 mm and whose rival refuses it anyway) and
-    # without its twin probe (which finds the needle).
+    # without its twin probe and its wide re-descent (each finds the needle).
     fitter = PoseFitter(st, MODEL, probe_rivals=False, probe_twin=False, probe_wide=False)
     twin = fitter.fit(*occ, short, **kw).T_cam_needle
     hw = MODEL.wire_radius * st.left.fx / T[2, 3]

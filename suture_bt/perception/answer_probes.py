@@ -1,11 +1,12 @@
 """The polished answer probed for a cheaper pose or a near-equal rival (:mod:`rival_probe`).
 
 The fit's answer is the cheapest polished final, but the search's starts may all have missed
-the needle's own basin. First the answer is taken back through the search's own wide stage
-(:func:`wide_redescent`), then four probes descend from it: its depth-mirror twin with the
+the needle's own basin. Four probes descend from the answer: its depth-mirror twin with the
 same end pixels, slides along its own circle (when an end is hidden), small turns, and the
-rival probe. All but the rival probe replace the answer when they find a cheaper pose (they are
-never its rivals); the rival probe's poses are kept as rivals, which the refusal gates weigh.
+rival probe. The first three replace the answer when they find a cheaper pose (they are never
+its rivals); the rival probe's poses are kept as rivals, which the refusal gates weigh. Then
+the probed answer is taken back through the search's own wide stage (:func:`wide_redescent`);
+a cheaper result replaces it, and the probes run again from it.
 """
 
 from __future__ import annotations

@@ -140,7 +140,7 @@ class PoseFitter:
     #: Whether the answer's depth-mirror twin with the same end pixels is also descended from
     #: (:func:`~rival_probe.twin_starts`; a cheaper result replaces the answer).
     probe_twin: bool = True
-    #: Whether the answer is first descended again from the search's wide stage
+    #: Whether the probed answer is also descended again from the search's wide stage
     #: (:func:`~answer_probes.wide_redescent`; a cheaper result replaces the answer).
     probe_wide: bool = True
     #: The task's known tissue solid as convex pieces of world (point, outward normal) planes
