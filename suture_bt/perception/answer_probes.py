@@ -6,7 +6,7 @@ same end pixels, slides along its own circle (when an end is hidden), small turn
 rival probe. The first three replace the answer when they find a cheaper pose (they are never
 its rivals); the rival probe's poses are kept as rivals, which the refusal gates weigh. Then
 the probed answer is taken back through the search's own wide stage (:func:`wide_redescent`);
-a cheaper result replaces it, and the probes run again from it.
+a cheaper result replaces it, and the probes run again from it when it moved.
 """
 
 from __future__ import annotations
@@ -18,10 +18,12 @@ import numpy as np
 
 from suture_bt.perception.fit_solver import levenberg_marquardt
 from suture_bt.perception.needle_prior import choose_answer
+from suture_bt.perception.needle_projection import params_to_pose
 from suture_bt.perception.rival_probe import (
     FitRays,
     RivalProbe,
     near_starts,
+    pose_offset,
     probe_together,
     slide_starts,
     twin_starts,
@@ -38,12 +40,18 @@ SMALL_PROBE = {"n_mid": 2, "n_polish": 1}
 #: held-out report seed 30513549 (`held_start` #33 without priors: a held needle 33 mm away
 #: answered 7.0 deg slid along its circle, at 1.76x the needle's cost; warm-started from the
 #: answer, or from it slid by up to 16 deg either way, the fit found the needle; the slide
-#: probe did not). On 2,368 cached development calls it changed 12 answers: 3 wrong ones right
-#: (176, 6.2 and 5.2 deg off before; 0.27, 0.01 and 3.0 after), 1 refusal right, 4 right ones
-#: nearer, 3 right ones a little farther (at most 1.4 -> 1.7 deg), 1 wrong one still wrong.
+#: probe did not). On 2,368 cached development calls it changed 9 answers: 2 wrong ones right
+#: (6.2 and 5.2 deg off before; 0.01 and 3.0 after), 4 right ones nearer, 2 right ones a
+#: little farther (at most 1.4 -> 1.7 deg), 1 wrong one still wrong.
 WIDE_SIGMA_PX = 3.0
 #: LM iterations of the wide re-descent's three stages (the search's own: ``PoseFitter``).
 WIDE_ITERATIONS = (8, 8, 6)
+#: A re-descended answer that moved farther than this (mm, deg) from the probed one is probed
+#: again; a nearer one (the same basin, polished a little further: most calls) keeps the
+#: probes' results. Probing every replaced answer again (commit c200666) took the fit's p95
+#: from 53-55 to 69 ms on session 34's report seed 92847598, for one more development answer
+#: right (93896709 `held_start` #37, 176 deg off, which a re-probe after a small move fixed).
+REPROBE_MM, REPROBE_DEG = 0.2, 1.0
 
 
 def wide_redescent(fitter: PoseFitter, x_answer, rays: FitRays, polish: list):
@@ -83,8 +91,8 @@ def probed(
     """The polished finals (parameters ``xf``, costs ``cf``; ``chosen`` = the answer's index,
     prior-consistent rows, prior misses) with the probes' and the wide re-descent's poses
     added: (x, cost, answer index, prior-consistent, prior misses, which rows are rivals of
-    the answer). When the wide re-descent replaces the probed answer, the probes run again
-    from the new one (its rivals are then probed around it)."""
+    the answer). When the wide re-descent moves the probed answer (beyond REPROBE_MM or
+    REPROBE_DEG), the probes run again from the new one (its rivals are probed around it)."""
     probes = answer_probes(fitter, hidden_end)
     near = np.zeros(len(xf), bool)
     xf, cf, b, ok, misses, near = _probe_round(
@@ -93,12 +101,16 @@ def probed(
     if fitter.probe_wide:
         xw, cw = wide_redescent(fitter, xf[b], rays, polish)
         if cw[0] < cf[b]:  # a cheaper pose only
+            poses = params_to_pose(np.stack([xf[b], xw[0]]), fitter.stereo.left, fitter.model)
+            mm, deg = pose_offset(poses[0], poses[1])
             xf, cf = np.concatenate([xf, xw]), np.concatenate([cf, cw])
             near = np.concatenate([near, [False]])
             chosen = choose_answer(fitter.world_poses(xf), cf, priors, fitter.model)
-            xf, cf, b, ok, misses, near = _probe_round(
-                fitter, probes, xf, cf, chosen, near, rays, polish, priors
-            )
+            b, ok, misses = chosen
+            if mm > REPROBE_MM or deg > REPROBE_DEG:
+                xf, cf, b, ok, misses, near = _probe_round(
+                    fitter, probes, xf, cf, chosen, near, rays, polish, priors
+                )
     return xf, cf, b, ok, misses, near
 
 
