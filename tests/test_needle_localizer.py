@@ -1,6 +1,8 @@
 """The localisation pipeline: empty images give NeedleNotFound (never another exception),
 bad inputs a clear ValueError, and (with the shipped weights) a rendered needle is found."""
 
+from dataclasses import replace
+
 import numpy as np
 import pytest
 import torch
@@ -316,3 +318,18 @@ def test_an_answer_in_a_narrow_basin_is_descended_again_from_the_searchs_wide_st
     loc.fitter.probe_wide = False
     est = loc.localize(left, right, priors=priors)
     assert pose_errors(est.T_cam_needle, T)[1] > 5.0  # the old answer, for the record
+
+
+def test_a_held_needle_pushed_into_the_tissue_is_refused_not_slid_to_its_surface():
+    """Report seed 82330937 (session 34), ``held_start`` #68 with its priors: PSM2's offset
+    put the needle's tip 2.6 mm of arc into the tissue, its base end under the jaw. The fit put
+    the tip where the wire meets the tissue, 14 deg off along the circle; slid up to 8 deg
+    into the tissue the arc shows the same wire and still passes the pinch point
+    (``tissue_slide``): refused, saying so."""
+    stereo_model, left, right, T, priors, tissue = task_scene("held_start", 68, seed=82330937)
+    loc = NeedleLocalizer(stereo_model, tissue=tissue)
+    with pytest.raises(NeedleNotFound, match="meets the tissue and the needle may go on into it"):
+        loc.localize(left, right, priors=priors)
+    loc.gates = replace(loc.gates, max_tissue_slide_deg=float("inf"))
+    est = loc.localize(left, right, priors=priors)
+    assert pose_errors(est.T_cam_needle, T)[1] > 10.0  # the old answer, for the record

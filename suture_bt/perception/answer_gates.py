@@ -19,6 +19,7 @@ from suture_bt.perception.spread_limits import (
     MAX_ANGLE_STD_DEG_IN_TISSUE,
     angle_std_limit,
 )
+from suture_bt.perception.tissue_slide import MAX_TISSUE_SLIDE_DEG
 
 #: A final fit whose RMS edge residual exceeds this (px) is refused: over six benchmark sets
 #: (1,200 scenes: 1080p and 480p, unoccluded and occluded, two seeds) every correct fit stayed
@@ -52,7 +53,7 @@ REFIT_MOVED_PX = 8.0
 @dataclass(frozen=True)
 class AnswerGates:
     """The localiser's refusal limits (defaults: the module constants above and those of
-    :mod:`rival_probe`, :mod:`spread_limits` and :mod:`exposure_gate`)."""
+    :mod:`rival_probe`, :mod:`spread_limits`, :mod:`exposure_gate` and :mod:`tissue_slide`)."""
 
     #: The worst final RMS edge residual answered (px).
     max_rms_px: float = MAX_RMS_PX
@@ -74,6 +75,8 @@ class AnswerGates:
     refit_moved_px: float = REFIT_MOVED_PX
     #: Arc (m) a fit may leave unseen with nothing hiding it (inf: no check).
     max_exposed: float = MAX_EXPOSED
+    #: How far (deg) an answer may slide along its circle into the tissue (inf: no check).
+    max_tissue_slide_deg: float = MAX_TISSUE_SLIDE_DEG
 
     def angle_std_limit(self, priors: Sequence[NeedlePrior]) -> float:
         """The loosest predicted angle spread answered for these priors

@@ -74,17 +74,8 @@ class ExposureGate:
         ``max_exposed`` (m) with no needle and nothing in front of it, wire both see lies
         deep in the tissue, or an eye sees less than ``min_seen`` (m) of the arc.
         ``priors``' ports (with normals) may hide the wire below them."""
-        ports = port_planes(priors)
-        inside, tissue_hides = self.tissue, self.tissue is None and not ports
-        if ports:
-            planes = below_port_planes(ports)
-            known = self.tissue
-            inside = (
-                planes
-                if known is None
-                else (lambda w, margin=0.0: planes(w, margin) | known(w, margin))
-            )
-        hw = max(self.model.wire_radius * self.stereo.left.fx / float(T_cam[2, 3]), 1.0)
+        inside, tissue_hides = self.hiders(priors)
+        hw = self.half_width(T_cam)
         exp = arc_exposure(
             images,
             (views[0], views[1]),
@@ -121,3 +112,23 @@ class ExposureGate:
                 "(a mirror twin or a pose slid along its circle)"
             )
         return exp
+
+    def hiders(self, priors) -> tuple[Callable[..., np.ndarray] | None, bool]:
+        """Where the tissue may hide the wire (world points → bool; None: nowhere known) and
+        whether any tissue-coloured pixel may (no tissue knowledge and no ports in
+        ``priors``)."""
+        ports = port_planes(priors)
+        inside, tissue_hides = self.tissue, self.tissue is None and not ports
+        if ports:
+            planes = below_port_planes(ports)
+            known = self.tissue
+            inside = (
+                planes
+                if known is None
+                else (lambda w, margin=0.0: planes(w, margin) | known(w, margin))
+            )
+        return inside, tissue_hides
+
+    def half_width(self, T_cam: np.ndarray) -> float:
+        """The wire's half width (px, at least 1) at the pose's depth."""
+        return max(self.model.wire_radius * self.stereo.left.fx / float(T_cam[2, 3]), 1.0)

@@ -11,8 +11,9 @@
    caller's priors and the tissue's share of the arc allow (:mod:`spread_limits`).
 4. The fitted arc's unseen part must be hidden by something (:mod:`exposure_gate`,
    :mod:`unseen_arc`: a jaw or shaft, the border, the tissue where the caller's tissue model
-   says it can hide it), and no wire both eyes see may lie deep inside the known tissue; else
-   a refusal.
+   says it can hide it), and no wire both eyes see may lie deep inside the known tissue; an
+   end that meets the tissue may not leave the needle free to slide on into it
+   (:mod:`tissue_slide`); else a refusal.
 5. The outline cannot tell base from tip: the colour at the fitted ends (the violet swage band
    at the base, :mod:`needle_ends`; :mod:`base_or_tip`) does, else continuity with the previous
    estimate or the holder's jaws; a fit whose arc passes beside the seen band is refused.
@@ -75,6 +76,7 @@ from suture_bt.perception.spread_limits import (  # noqa: F401 - the limits, re-
     check_spread_in_tissue,
 )
 from suture_bt.perception.stray_pieces import stray_pieces, without
+from suture_bt.perception.tissue_slide import check_tissue_slide, tissue_slide
 
 #: The fit searches no nearer than this share of the nearest stereo depth (keypoints', masks').
 NEAR_SLACK = 0.7
@@ -227,6 +229,18 @@ class NeedleLocalizer:
         )
         gate = ExposureGate(self.stereo, self.model, rule, self.tissue, gates.max_exposed)
         exposure = gate((left, right), views, fit.T_cam_needle, priors)
+        slide = tissue_slide(
+            (left, right),
+            views,
+            self.stereo,
+            fit.T_cam_needle,
+            self.model,
+            gate.half_width(fit.T_cam_needle),
+            rule,
+            *gate.hiders(priors),
+            priors,
+        )
+        check_tissue_slide(slide, gates.max_tissue_slide_deg)
         t3 = time.perf_counter()
         jaws = [p for p in priors if isinstance(p, AcrossJawsPrior)]
         T_cam, evidence, decided_by = self.base_tip(rule).orient(

@@ -89,34 +89,19 @@ def _longest_run(flags: np.ndarray) -> int:
     return best
 
 
-def arc_exposure(
+def classify_points(
     images: tuple[np.ndarray, np.ndarray],
     views: tuple[MaskView, MaskView],
     stereo: StereoCameraModel,
-    T_cam_needle: np.ndarray,
-    model: NeedleModel,
+    world: np.ndarray,
+    in_tissue: np.ndarray,
     half_width: float,
-    rule: ColourRule | None = None,
-    inside_tissue: Callable[[np.ndarray], np.ndarray] | None = None,
+    rule: ColourRule,
     tissue_hides: bool = False,
-) -> ArcExposure:
-    """Class every centre-line sample of the pose (left-camera frame) in both eyes;
-    ``tissue_hides``: any tissue-coloured pixel may hide the needle (its depth unknown)."""
-    rule = rule or ColourRule()
-    angles = np.linspace(model.tip_angle, model.base_angle, N_SAMPLES)
-    pts = model.point_at(angles)
-    T_world = stereo.left.T_world_cam @ np.asarray(T_cam_needle, float)
-    world = pts @ T_world[:3, :3].T + T_world[:3, 3]
-    in_tissue = (
-        np.zeros(len(pts), bool) if inside_tissue is None else np.asarray(inside_tissue(world))
-    )
-    deep = (
-        np.zeros(len(pts), bool)
-        if inside_tissue is None
-        else np.asarray(inside_tissue(world, margin=DEEP))
-    )
-    step = model.radius * (angles[1] - angles[0])
-    classes, runs, ends, totals, seen = [], [], [], [], []
+) -> tuple[np.ndarray, np.ndarray]:
+    """Each eye's class (SEEN, HIDDEN, EXPOSED) of centre-line points (N, 3, world);
+    ``in_tissue`` (N,) marks those the known tissue may hide."""
+    classes = []
     for img, view, cam in zip(images, views, (stereo.left, stereo.right), strict=True):
         uv = cam.project(world)
         H, W = img.shape[:2]
@@ -160,6 +145,41 @@ def arc_exposure(
             cls[inside] = sub
         cls[border] = HIDDEN
         classes.append(cls)
+    return classes[0], classes[1]
+
+
+def arc_exposure(
+    images: tuple[np.ndarray, np.ndarray],
+    views: tuple[MaskView, MaskView],
+    stereo: StereoCameraModel,
+    T_cam_needle: np.ndarray,
+    model: NeedleModel,
+    half_width: float,
+    rule: ColourRule | None = None,
+    inside_tissue: Callable[[np.ndarray], np.ndarray] | None = None,
+    tissue_hides: bool = False,
+) -> ArcExposure:
+    """Class every centre-line sample of the pose (left-camera frame) in both eyes;
+    ``tissue_hides``: any tissue-coloured pixel may hide the needle (its depth unknown)."""
+    rule = rule or ColourRule()
+    angles = np.linspace(model.tip_angle, model.base_angle, N_SAMPLES)
+    pts = model.point_at(angles)
+    T_world = stereo.left.T_world_cam @ np.asarray(T_cam_needle, float)
+    world = pts @ T_world[:3, :3].T + T_world[:3, 3]
+    in_tissue = (
+        np.zeros(len(pts), bool) if inside_tissue is None else np.asarray(inside_tissue(world))
+    )
+    deep = (
+        np.zeros(len(pts), bool)
+        if inside_tissue is None
+        else np.asarray(inside_tissue(world, margin=DEEP))
+    )
+    step = model.radius * (angles[1] - angles[0])
+    classes = classify_points(
+        images, views, stereo, world, in_tissue, half_width, rule, tissue_hides
+    )
+    runs, ends, totals, seen = [], [], [], []
+    for cls in classes:
         runs.append(_longest_run(cls == EXPOSED) * step)
         ex = cls == EXPOSED
         totals.append(float(ex.sum() * step))
