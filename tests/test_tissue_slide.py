@@ -4,9 +4,10 @@ image and the priors let it slide along its circle that way, and kept when somet
 
 import numpy as np
 import pytest
-from test_unseen_arc import HW, MODEL, PINK, _scene
+from test_unseen_arc import MODEL, PINK, _scene
 
 from suture_bt.perception.colour_refine import ColourRule
+from suture_bt.perception.exposure_gate import ExposureGate
 from suture_bt.perception.needle_prior import HeldPrior
 from suture_bt.perception.refusal import NeedleNotFound
 from suture_bt.perception.tissue_slide import (
@@ -45,8 +46,8 @@ def _tissue_past(st, T, angle: float):
 
 def _slide(occluder: bool, priors=()):
     st, T, images, views = _scene(occluder=occluder, background=PINK)
-    inside = _tissue_past(st, T, _seen_end(st, T))
-    return tissue_slide(images, views, st, T, MODEL, HW, ColourRule(), inside, False, priors)
+    gate = ExposureGate(st, MODEL, ColourRule(), tissue=_tissue_past(st, T, _seen_end(st, T)))
+    return tissue_slide(gate, images, views, T, priors)
 
 
 def test_a_needle_between_a_jaw_and_the_tissue_may_slide_into_the_tissue():
@@ -72,6 +73,6 @@ def test_a_held_place_pins_the_slide():
 
 def test_no_tissue_known_means_no_slide():
     st, T, images, views = _scene(occluder=True, background=PINK)
-    slide = tissue_slide(images, views, st, T, MODEL, HW, ColourRule(), None)
+    slide = tissue_slide(ExposureGate(st, MODEL, ColourRule()), images, views, T)
     assert slide == TissueSlide()
     check_tissue_slide(TissueSlide(40.0, 0.0), limit_deg=float("inf"))

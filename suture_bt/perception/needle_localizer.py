@@ -229,17 +229,7 @@ class NeedleLocalizer:
         )
         gate = ExposureGate(self.stereo, self.model, rule, self.tissue, gates.max_exposed)
         exposure = gate((left, right), views, fit.T_cam_needle, priors)
-        slide = tissue_slide(
-            (left, right),
-            views,
-            self.stereo,
-            fit.T_cam_needle,
-            self.model,
-            gate.half_width(fit.T_cam_needle),
-            rule,
-            *gate.hiders(priors),
-            priors,
-        )
+        slide = tissue_slide(gate, (left, right), views, fit.T_cam_needle, priors)
         check_tissue_slide(slide, gates.max_tissue_slide_deg)
         t3 = time.perf_counter()
         jaws = [p for p in priors if isinstance(p, AcrossJawsPrior)]

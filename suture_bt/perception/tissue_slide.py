@@ -18,14 +18,12 @@ pinch point stays on the arc, a port stays passed). An answer that may slide far
 
 from __future__ import annotations
 
-from collections.abc import Callable, Sequence
+from collections.abc import Sequence
 from dataclasses import dataclass
 
 import numpy as np
 
-from suture_bt.geometry import NeedleModel
-from suture_bt.interfaces import StereoCameraModel
-from suture_bt.perception.colour_refine import ColourRule
+from suture_bt.perception.exposure_gate import ExposureGate
 from suture_bt.perception.mask_view import MaskView
 from suture_bt.perception.needle_prior import NeedlePrior, consistent, prior_misses
 from suture_bt.perception.refusal import NeedleNotFound
@@ -63,20 +61,17 @@ class TissueSlide:
 
 
 def tissue_slide(
+    gate: ExposureGate,
     images: tuple[np.ndarray, np.ndarray],
     views: tuple[MaskView, MaskView],
-    stereo: StereoCameraModel,
     T_cam: np.ndarray,
-    model: NeedleModel,
-    half_width: float,
-    rule: ColourRule,
-    inside_tissue: Callable[..., np.ndarray] | None,
-    tissue_hides: bool = False,
     priors: Sequence[NeedlePrior] = (),
 ) -> TissueSlide:
-    """How far the pose ``T_cam`` (left-camera frame) may slide into the tissue each way;
-    ``inside_tissue`` (world points, ``margin``) is where the tissue may hide the wire (None:
-    nothing known, no slide is looked for), ``tissue_hides`` as the exposure gate's."""
+    """How far the pose ``T_cam`` (left-camera frame) may slide into the tissue each way,
+    classed as ``gate`` classes the arc (its cameras, needle, colour rule and tissue; with no
+    tissue known and no port in ``priors``, no slide is looked for)."""
+    stereo, model = gate.stereo, gate.model
+    inside_tissue, tissue_hides = gate.hiders(priors)
     if inside_tissue is None:
         return TissueSlide()
     step = (model.base_angle - model.tip_angle) / (N_SAMPLES - 1)
@@ -93,7 +88,7 @@ def tissue_slide(
         return TissueSlide()
     in_tissue = np.asarray(inside_tissue(world))
     classes = classify_points(
-        images, views, stereo, world, in_tissue, half_width, rule, tissue_hides
+        images, views, stereo, world, in_tissue, gate.half_width(T_cam), gate.rule, tissue_hides
     )
     exposed = np.stack([np.cumsum(np.r_[0, c == EXPOSED]) for c in classes])
     exposed0 = exposed[:, n_ext + N_SAMPLES] - exposed[:, n_ext]
