@@ -133,9 +133,14 @@ def near_starts(T: np.ndarray, model: NeedleModel) -> np.ndarray:
 
 
 def slide_starts(T: np.ndarray, model: NeedleModel) -> np.ndarray:
-    """Poses (K, 4, 4, left camera) slid from ``T`` along its own circle by SLIDE_ANGLES_DEG
-    (turned about the needle's z axis through the arc centre)."""
-    R = Rotation.from_rotvec(np.outer(np.deg2rad(SLIDE_ANGLES_DEG), T[:3, 2])).as_matrix()
+    """Poses (K, 4, 4, left camera) slid from ``T`` along its own circle by SLIDE_ANGLES_DEG."""
+    return slid_along_circle(T, np.deg2rad(SLIDE_ANGLES_DEG))
+
+
+def slid_along_circle(T: np.ndarray, angles) -> np.ndarray:
+    """Poses (K, 4, 4, in ``T``'s frame) slid from ``T`` along its own circle by ``angles``
+    (rad; turned about the needle's z axis through the arc centre)."""
+    R = Rotation.from_rotvec(np.outer(np.asarray(angles, float), T[:3, 2])).as_matrix()
     return _turned_about_centre(T, R)
 
 

@@ -27,6 +27,7 @@ from suture_bt.perception.exposure_gate import ExposureGate
 from suture_bt.perception.mask_view import MaskView
 from suture_bt.perception.needle_prior import NeedlePrior, consistent, prior_misses
 from suture_bt.perception.refusal import NeedleNotFound
+from suture_bt.perception.rival_probe import slid_along_circle
 from suture_bt.perception.unseen_arc import EXPOSED, N_SAMPLES, SEEN, classify_points
 
 #: How far (deg) a slide is tried.
@@ -112,19 +113,10 @@ def tissue_slide(
             exposed[:, b] - exposed[:, a] <= exposed0[:, None] + SLACK_SAMPLES, axis=0
         )
         if priors:
-            ok &= consistent(prior_misses(priors, T_world[None] @ _turns(s * step), model))
+            ok &= consistent(prior_misses(priors, slid_along_circle(T_world, s * step), model))
         n = int(np.argmin(ok)) if not ok.all() else len(ok)
         reach.append(float(np.degrees(n * step)))
     return TissueSlide(reach[0], reach[1])
-
-
-def _turns(angles: np.ndarray) -> np.ndarray:
-    """Rotations (K, 4, 4) about the needle's own z axis (its circle's axis) by ``angles``."""
-    c, s = np.cos(angles), np.sin(angles)
-    R = np.zeros((len(angles), 4, 4))
-    R[:, 0, 0], R[:, 0, 1], R[:, 1, 0], R[:, 1, 1] = c, -s, s, c
-    R[:, 2, 2] = R[:, 3, 3] = 1.0
-    return R
 
 
 def check_tissue_slide(slide: TissueSlide, limit_deg: float = MAX_TISSUE_SLIDE_DEG) -> None:
