@@ -12,6 +12,8 @@ a cheaper result replaces it, and the probes run again from it when it moved.
 from __future__ import annotations
 
 import functools
+from collections.abc import Sequence
+from dataclasses import dataclass
 from typing import TYPE_CHECKING
 
 import numpy as np
@@ -85,6 +87,43 @@ def answer_probes(fitter: PoseFitter, hidden_end: bool) -> list[RivalProbe]:
     return probes
 
 
+@dataclass(frozen=True)
+class ProbeContext:
+    """What stays fixed while an answer is probed: the fitter, the probes it turns on, the
+    fit's edge rays, the polish terms and the task priors."""
+
+    fitter: PoseFitter
+    probes: list[RivalProbe]
+    rays: FitRays
+    polish: list
+    priors: Sequence
+
+
+@dataclass
+class Finals:
+    """The polished poses as probing grows them: parameters ``x``, costs, the answer's index,
+    the prior-consistent rows, the prior misses, and which rows are rivals of the answer."""
+
+    x: np.ndarray
+    cost: np.ndarray
+    b: int
+    ok: np.ndarray | None
+    misses: np.ndarray | None
+    near: np.ndarray
+
+    def astuple(self) -> tuple:
+        return self.x, self.cost, self.b, self.ok, self.misses, self.near
+
+    def chosen_again(self, ctx: ProbeContext) -> None:
+        """The answer chosen again among all rows (:func:`choose_answer` with the priors)."""
+        world = ctx.fitter.world_poses(self.x)
+        self.b, self.ok, self.misses = choose_answer(world, self.cost, ctx.priors, ctx.fitter.model)
+
+    def add(self, x: np.ndarray, cost: np.ndarray, near: bool) -> None:
+        self.x, self.cost = np.concatenate([self.x, x]), np.concatenate([self.cost, cost])
+        self.near = np.concatenate([self.near, np.full(len(x), near)])
+
+
 def probed(
     fitter: PoseFitter, xf, cf, chosen, rays: FitRays, polish: list, priors, hidden_end: bool
 ):
@@ -93,44 +132,39 @@ def probed(
     added: (x, cost, answer index, prior-consistent, prior misses, which rows are rivals of
     the answer). When the wide re-descent moves the probed answer (beyond REPROBE_MM or
     REPROBE_DEG), the probes run again from the new one (its rivals are probed around it)."""
-    probes = answer_probes(fitter, hidden_end)
-    near = np.zeros(len(xf), bool)
-    xf, cf, b, ok, misses, near = _probe_round(
-        fitter, probes, xf, cf, chosen, near, rays, polish, priors
-    )
+    ctx = ProbeContext(fitter, answer_probes(fitter, hidden_end), rays, polish, priors)
+    finals = Finals(xf, cf, *chosen, near=np.zeros(len(xf), bool))
+    _probe_round(ctx, finals)
     if fitter.probe_wide:
-        xw, cw = wide_redescent(fitter, xf[b], rays, polish)
-        if cw[0] < cf[b]:  # a cheaper pose only
-            poses = params_to_pose(np.stack([xf[b], xw[0]]), fitter.stereo.left, fitter.model)
+        b = finals.b
+        xw, cw = wide_redescent(fitter, finals.x[b], rays, polish)
+        if cw[0] < finals.cost[b]:  # a cheaper pose only
+            poses = params_to_pose(np.stack([finals.x[b], xw[0]]), fitter.stereo.left, fitter.model)
             mm, deg = pose_offset(poses[0], poses[1])
-            xf, cf = np.concatenate([xf, xw]), np.concatenate([cf, cw])
-            near = np.concatenate([near, [False]])
-            chosen = choose_answer(fitter.world_poses(xf), cf, priors, fitter.model)
-            b, ok, misses = chosen
+            finals.add(xw, cw, near=False)
+            finals.chosen_again(ctx)
             if mm > REPROBE_MM or deg > REPROBE_DEG:
-                xf, cf, b, ok, misses, near = _probe_round(
-                    fitter, probes, xf, cf, chosen, near, rays, polish, priors
-                )
-    return xf, cf, b, ok, misses, near
+                _probe_round(ctx, finals)
+    return finals.astuple()
 
 
-def _probe_round(fitter: PoseFitter, probes, xf, cf, chosen, near, rays: FitRays, polish, priors):
-    """``probes`` run from the ``chosen`` answer (index, prior-consistent rows, misses):
-    (x, cost, answer index, prior-consistent, prior misses, rivals) with their poses added.
+def _probe_round(ctx: ProbeContext, finals: Finals) -> None:
+    """The probes run from the answer of ``finals``, their poses added to it (and the answer
+    chosen again after each probe).
 
     Each probe starts from the answer the probes before it left, so all of them descend
     together from the answer and a probe is run again only after an earlier one has moved it
     (the same results with one descent per stage instead of four)."""
+    fitter, probes = ctx.fitter, ctx.probes
     rivals = probes[-1] if fitter.probe_rivals else None
     loss = fitter.final_loss
-    b, ok, misses = chosen
-    start = xf[b].copy()
-    results = probe_together(probes, [start] * len(probes), rays, polish, loss)
+    start = finals.x[finals.b].copy()
+    results = probe_together(probes, [start] * len(probes), ctx.rays, ctx.polish, loss)
     for i, probe in enumerate(probes):
-        if not np.array_equal(xf[b], start):  # an earlier probe moved the answer
-            start = xf[b].copy()
+        if not np.array_equal(finals.x[finals.b], start):  # an earlier probe moved the answer
+            start = finals.x[finals.b].copy()
             rest = probes[i:]
-            results[i:] = probe_together(rest, [start] * len(rest), rays, polish, loss)
+            results[i:] = probe_together(rest, [start] * len(rest), ctx.rays, ctx.polish, loss)
         xs, cs = results[i]
         cs = np.where(fitter.in_range(xs), cs, np.inf)
         if probe is rivals:
@@ -138,12 +172,9 @@ def _probe_round(fitter: PoseFitter, probes, xf, cf, chosen, near, rays: FitRays
             # it): the other finals are separate basins, mostly the mirror twin, whose small
             # cost gap decides reliably on a whole outline (its own refusals: the priors, the
             # spread).
-            near = np.concatenate([near, np.ones(len(xs), bool)])
-            near[b] = True
-            xf, cf = np.concatenate([xf, xs]), np.concatenate([cf, cs])
+            finals.near[finals.b] = True
+            finals.add(xs, cs, near=True)
         else:
-            keep = cs < cf[b]  # a cheaper pose only
-            xf, cf = np.concatenate([xf, xs[keep]]), np.concatenate([cf, cs[keep]])
-            near = np.concatenate([near, np.zeros(keep.sum(), bool)])
-        b, ok, misses = choose_answer(fitter.world_poses(xf), cf, priors, fitter.model)
-    return xf, cf, b, ok, misses, near
+            keep = cs < finals.cost[finals.b]  # a cheaper pose only
+            finals.add(xs[keep], cs[keep], near=False)
+        finals.chosen_again(ctx)
