@@ -6,7 +6,13 @@ import numpy as np
 from perception_helpers import pose_errors
 from test_pose_fit import MODEL, _scene_1080p
 
-from suture_bt.perception.answer_probes import answer_probes, probed, wide_redescent
+from suture_bt.perception.answer_probes import (
+    Finals,
+    ProbeContext,
+    answer_probes,
+    probed,
+    wide_redescent,
+)
 from suture_bt.perception.edge_residuals import edge_rays
 from suture_bt.perception.mask_view import edge_points
 from suture_bt.perception.needle_projection import params_to_pose, pose_to_params
@@ -65,3 +71,18 @@ def test_the_wide_redescent_takes_an_answer_slid_along_its_circle_back_to_the_ne
     pos, ang = pose_errors(params_to_pose(x, st.left, MODEL)[0], T)
     assert pos < 0.3 and ang < 1.0
     assert np.isfinite(cost[0])
+
+
+def test_finals_grow_with_rivals_marked_and_the_answer_chosen_again_by_cost():
+    st, *_ = _scene_1080p(5, 0.0)
+    fitter = PoseFitter(st, MODEL)
+    ctx = ProbeContext(fitter, [], None, [], [])
+    x = np.zeros((2, 6))
+    finals = Finals(x, np.array([2.0, 3.0]), 0, None, None, np.zeros(2, bool))
+    finals.add(np.ones((1, 6)), np.array([1.0]), near=True)
+    finals.add(np.ones((2, 6)), np.array([5.0, 4.0]), near=False)
+    assert finals.near.tolist() == [False, False, True, False, False]
+    assert finals.cost.tolist() == [2.0, 3.0, 1.0, 5.0, 4.0] and finals.x.shape == (5, 6)
+    finals.chosen_again(ctx)  # no priors: the cheapest row
+    assert finals.b == 2 and finals.misses is None
+    assert len(finals.astuple()) == 6
