@@ -18,6 +18,7 @@ from suture_bt.perception.needle_prior import (
 )
 from suture_bt.perception.needle_projection import params_to_pose, pose_to_params
 from suture_bt.perception.prior_term import (
+    PLACE_SIGMA_SHARE,
     PRIOR_PX,
     HeldPlaceTerm,
     PriorTerm,
@@ -87,8 +88,9 @@ def test_prior_information_is_the_misses_jacobian_outer_product():
 
 def test_a_held_place_adds_the_slide_along_the_circle_a_point_alone_leaves_free():
     """The pinch point on the arc says nothing of where along its circle the needle sits;
-    the held place does: its signed slide in tolerances, modulo the base ↔ tip swap, and one
-    more direction of information. The search's own term carries the slides alone."""
+    the held place does: its signed slide in standard deviations (PLACE_SIGMA_SHARE of its
+    tolerance, a bound), modulo the base ↔ tip swap, and one more direction of information.
+    The search's own term carries the slides alone."""
     st = stereo(640, 480)
     T = random_needle_pose(np.random.default_rng(5), 0.06, 0.1)
     T_world = st.left.T_world_cam @ T
@@ -100,7 +102,10 @@ def test_a_held_place_adds_the_slide_along_the_circle_a_point_alone_leaves_free(
     assert abs(term.slides(T[None])[0, 0]) < 1e-9
     turn = make_transform(Rotation.from_rotvec([0.0, 0.0, 0.05]).as_matrix(), np.zeros(3))
     slid = T @ turn
-    assert term.slides(slid[None])[0, 0] == pytest.approx(-0.05 * MODEL.radius / 0.0005)
+    sigma = PLACE_SIGMA_SHARE * 0.0005
+    assert term.slides(slid[None])[0, 0] == pytest.approx(-0.05 * MODEL.radius / sigma)
+    bound = placed.miss(st.left.T_world_cam @ slid, MODEL)  # the gate: in tolerances
+    assert bound == pytest.approx(0.05 * MODEL.radius / 0.0005)
     swapped = T.copy()
     swapped[:3, :3] = T[:3, :3] @ MODEL.swap_rotation()
     assert abs(term.slides(swapped[None])[0, 0]) < 1e-9

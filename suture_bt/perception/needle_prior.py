@@ -45,7 +45,8 @@ class HeldPrior:
 
     ``arc_angle`` (optional, rad in the needle frame: where along the needle the jaw holds
     it, as the caller's own grasp knows it) adds that the pinch point sits at that place of
-    the arc within ``arc_tolerance`` (m along the arc). A needle with both ends hidden (one in
+    the arc within ``arc_tolerance`` (m along the arc: a bound; the fit weighs the place at
+    :data:`~.prior_term.PLACE_SIGMA_SHARE` of it). A needle with both ends hidden (one in
     the tissue, one in the jaw) slides along its own circle unseen; this pins the slide.
     Within the fit, whose candidates may have base and tip swapped, the place is taken modulo
     the swap; once the ends are told apart it is signed (:func:`check_held_place`)."""
@@ -54,7 +55,7 @@ class HeldPrior:
     pinch_point: np.ndarray
     tolerance: float = 0.003
     arc_angle: float | None = None
-    arc_tolerance: float = 0.0005
+    arc_tolerance: float = 0.001
 
     def slide(self, T_world_needle: np.ndarray, model: NeedleModel, signed: bool = False) -> float:
         """Arc length (m) from the held place to where the pinch point sits on this pose's
