@@ -53,9 +53,9 @@ HELD_TOLERANCE_CALIBRATED = 0.001
 #: How far (m, along the arc) the jaw may hold the needle from where the caller's belief
 #: says (``HeldPrior.arc_angle``): its grasps put it there within RMS 0.10-0.18 mm, at most
 #: 0.81 mm (6 development campaign trials, benchmarks/needle_task_scenes.HELD_PLACE_SPREAD).
-#: A bound over that largest miss (0.5 mm until session 36, which refused needles held where
-#: the belief said within its measured spread); the fit weighs half of it
-#: (``perception.prior_term.PLACE_SIGMA_SHARE``).
+#: A bound over that largest miss (until session 36 it was 0.5 mm, and refused needles held
+#: within that measured spread of where the belief said); the fit weighs the place at half of
+#: it (``perception.prior_term.PLACE_SIGMA_SHARE``). The tree passes no held place yet.
 HELD_PLACE_TOL = 0.001
 #: A needle whose centre is predicted nearer the left camera than the localiser's floor
 #: (``MIN_DEPTH``, 20 mm) plus this (m) is not worth a look: the localiser refuses it. (With
