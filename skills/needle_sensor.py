@@ -56,7 +56,8 @@ HELD_TOLERANCE_CALIBRATED = 0.001
 #: A bound over that largest miss (until session 36 it was 0.5 mm, and refused needles held
 #: within that measured spread of where the belief said); the fit weighs the place at half of
 #: it (``perception.prior_term.PLACE_SIGMA_SHARE``). The tree passes no held place yet.
-HELD_PLACE_TOL = 0.001
+#: The prior's own default, so the two cannot drift apart.
+HELD_PLACE_TOL = HeldPrior.arc_tolerance
 #: A needle whose centre is predicted nearer the left camera than the localiser's floor
 #: (``MIN_DEPTH``, 20 mm) plus this (m) is not worth a look: the localiser refuses it. (With
 #: the floor at 50 mm the in-hand check's risen views, 28 and 44 mm away, were refused on every
