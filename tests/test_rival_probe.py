@@ -5,7 +5,7 @@ circle, and from a pose slid off the needle it finds the needle. The near probe'
 take a Task 3 start answer stopped 5° off into the needle's own basin. A tie is measured
 apart from the answer's base ↔ tip swap, which is the same outline. Probes run together give
 each its own result, to the bit. The twin probe's starts keep the answer's end pixels, and
-from a twin it finds the needle."""
+from a twin it finds the needle, an edge-on needle's flip about its chord included."""
 
 from functools import partial
 
@@ -13,7 +13,7 @@ import numpy as np
 import pytest
 from perception_helpers import pose_errors
 from scipy.spatial.transform import Rotation
-from test_pose_fit import MODEL, _scene_1080p, _tip_hidden
+from test_pose_fit import MODEL, _scene_1080p, _tip_hidden, _views
 
 from suture_bt.perception.answer_gates import AnswerGates
 from suture_bt.perception.edge_residuals import edge_rays
@@ -245,3 +245,39 @@ def test_probes_with_other_cameras_or_iterations_are_not_run_together():
     probes = [RivalProbe(st, MODEL), RivalProbe(st, MODEL, iterations=(3, 3, 3))]
     with pytest.raises(ValueError, match="share their cameras, model and iterations"):
         probe_together(probes, [x, x], FitRays(None, None, None), [], "geman_mcclure")
+
+
+def _edge_on(seed: int):
+    """A scene whose needle is seen exactly edge-on by the left eye (psi = 90°: the arc's
+    plane holds the line of sight), its masks, and its flip about its own chord (psi = -90°:
+    the same ends, the arc bulging the other way in depth), which projects to the same line."""
+    st, T, *_ = _scene_1080p(seed, 0.0)
+    x = pose_to_params(T[None], st.left, MODEL)[0]
+    T_on = params_to_pose(np.array([*x[:5], np.pi / 2]), st.left, MODEL)
+    T_flip = params_to_pose(np.array([*x[:5], -np.pi / 2]), st.left, MODEL)
+    left, right = _views(st, T_on)
+    return st, T_on, T_flip, left, right
+
+
+def test_twin_starts_of_an_edge_on_arc_hold_its_flip_about_the_chord():
+    """Session 37: the twins kept only the chord's other depth roots, so an edge-on needle's
+    flip about its own chord (same ends, psi → -psi) was never a start."""
+    st, T_on, T_flip, *_ = _edge_on(5)
+    ends = [np.stack([P[:3, :3] @ MODEL.base + P[:3, 3], P[:3, :3] @ MODEL.tip + P[:3, 3]])
+            for P in (T_on, T_flip)]  # fmt: skip
+    assert np.allclose(ends[0], ends[1], atol=1e-9) and distinct(T_on, T_flip)
+    assert any(pose_offset(S, T_on) < (1e-6, 1e-6) for S in twin_starts(T_flip, MODEL, st.left))
+
+
+def test_from_an_edge_on_needles_flip_the_twin_probe_finds_the_needle():
+    """Held-out development scene (session 36's report seed 73942248, ``occluded`` #24): a
+    held needle seen 0.6° from edge-on, its middle behind the jaw, was answered as its flip
+    about its chord, 17 mm / 180° off, with the needle's own pose cheaper (rms 0.21 against
+    0.27 px) but never reached."""
+    st, T_on, T_flip, left, right = _edge_on(5)
+    rays = edge_rays(st, edge_points(left), edge_points(right))
+    x_flip = pose_to_params(T_flip[None], st.left, MODEL)[0]
+    probe = RivalProbe(st, MODEL, n_mid=1, n_polish=1, starts=partial(twin_starts, cam=st.left))
+    x, _ = probe(x_flip, FitRays(rays, rays, rays), [], "geman_mcclure")
+    errors = [pose_errors(P, T_on) for P in params_to_pose(x, st.left, MODEL)]
+    assert any(pos < 0.3 and ang < 1.0 for pos, ang in errors)

@@ -41,7 +41,13 @@ A fourth, the twin probe, starts from the answer's depth-mirror twin with the sa
 at 3.3× the needle's cost, because no start of the search fell into the needle's basin; the
 fit's second search, which starts about the twin, runs only where an end may be hidden or
 priors are given. Counting the twin's result as a rival refused 20 right answers for 2 wrong
-ones on the development frames (1,000 calls), so it is not one.
+ones on the development frames (1,000 calls), so it is not one. Its starts include the flip
+about the answer's own chord (the same ends, ``-psi``): the depth mirror of a needle seen
+edge-on, whose two sides project to one line. Found on session 36's held-out report seed
+73942248 (`occluded` #24): a held needle 0.6° from edge-on, its middle behind the jaw, was
+answered as that flip, 17 mm / 180° off with a predicted spread of 0.2°, though the needle's
+own pose was cheaper (rms 0.21 against 0.27 px). On 525 cached development calls (session 36's
+report seeds, with and without priors) it changed that answer alone, to 0.1 mm / 0.3°.
 """
 
 from __future__ import annotations
@@ -146,15 +152,19 @@ def slid_along_circle(T: np.ndarray, angles) -> np.ndarray:
 
 def twin_starts(T: np.ndarray, model: NeedleModel, cam: CameraModel) -> np.ndarray:
     """Poses (K, 4, 4, left camera) of ``T``'s depth-mirror twin with the same end pixels: the
-    arc turned to ``-psi`` about its chord, with the chord's other root at the base's depth
-    and with ``π - phi`` (the twin of a weak-perspective view); infeasible ones left out."""
+    arc turned to ``-psi`` about its chord, with the chord's other root at the base's depth,
+    with ``π - phi`` (the twin of a weak-perspective view) and with the same chord (an
+    edge-on arc's flip; left out where it is ``T`` itself, a face-on arc); infeasible ones
+    left out."""
     x = pose_to_params(T[None], cam, model)[0]
     base = T[:3, :3] @ model.base + T[:3, 3]
     roots = phi_from_base_depth(x[:2], x[2:4], base[2], cam, model)
-    phis = [p for p in (*roots, np.pi - x[4]) if abs(p - x[4]) > 1e-3]
+    phis = [*(p for p in (*roots, np.pi - x[4]) if abs(p - x[4]) > 1e-3), x[4]]
     xs = np.array([[*x[:4], p, -x[5]] for p in phis])
     poses = params_to_pose(xs, cam, model)
-    return poses[np.all(np.isfinite(poses), axis=(1, 2))]
+    keep = np.all(np.isfinite(poses), axis=(1, 2))
+    keep[-1] &= distinct(poses[-1], T)  # the same chord's twin of a face-on arc is the arc
+    return poses[keep]
 
 
 def pose_offset(Ta: np.ndarray, Tb: np.ndarray) -> tuple[float, float]:
