@@ -1,20 +1,24 @@
 """Reading the network's output: the input is area-downsampled and padded to the network's
-stride, a malformed image is a ValueError, keypoints on a small blob are dropped, and the
+stride, a malformed image is a ValueError, the right eye read in a window gives the whole
+image's output there and none elsewhere, keypoints on a small blob are dropped, and the
 trusted ends' stereo disparity gives a depth hint only when it is plausible."""
 
 import numpy as np
 import pytest
 import torch
 from perception_helpers import stereo
+from torch.nn import functional as F
 
 from suture_bt.perception.network import NeedleNet
 from suture_bt.perception.network_reading import (
     MIN_END_SEPARATION_PX,
+    OUTSIDE_WINDOW_LOGIT,
     blob_areas,
     net_input,
     read_network,
     trusted_ends_and_depth,
 )
+from suture_bt.perception.stereo_window import Window
 
 
 def test_net_input_keeps_the_aspect_and_pads_rows_to_a_multiple_of_16():
@@ -71,3 +75,30 @@ def test_trusted_ends_give_a_depth_from_their_disparity_when_it_is_plausible():
     assert trusted_ends_and_depth(kp, np.array([[0.9, 0.05], [0.9, 0.9]]), st) == (None, None)
     one_spot = np.stack([[left[0], left[0] + MIN_END_SEPARATION_PX / 2]] * 2)
     assert trusted_ends_and_depth(one_spot, np.full((2, 2), 0.9), st) == (None, None)
+
+
+@pytest.mark.parametrize("win", [Window(640, 320, 1408, 832), Window(1152, 576, 1920, 1088)])
+def test_the_right_eye_read_in_a_window_is_the_whole_images_output_there(win):
+    """A local stand-in for the network (2×2 average: its output at a place sees only that
+    place) shows the window's input pixels and output place are the whole image's, the
+    padded bottom rows included; outside the window the right eye sees nothing."""
+    rng = np.random.default_rng(3)
+    left = rng.integers(0, 255, (1080, 1920, 3), dtype=np.uint8)
+    right = rng.integers(0, 255, (1080, 1920, 3), dtype=np.uint8)
+
+    def net(x):
+        return F.avg_pool2d(x, 2)
+
+    whole = read_network(net, left, right, 480)
+    seen = []
+    got = read_network(net, left, right, 480, lambda *a: seen.append(a) or win)
+    prob_left, scale, input_scale, shape = seen[0]
+    assert scale == 8.0 and input_scale == 0.25 and shape == (1080, 1920)
+    np.testing.assert_array_equal(prob_left, whole[0][0])
+    np.testing.assert_array_equal(got[0][0], whole[0][0])
+    r0, r1, c0, c1 = win.y0 // 8, win.y1 // 8, win.x0 // 8, win.x1 // 8
+    np.testing.assert_allclose(got[0][1][r0:r1, c0:c1], whole[0][1][r0:r1, c0:c1], atol=1e-6)
+    outside = np.ones(got[0][1].shape, bool)
+    outside[r0:r1, c0:c1] = False
+    outside_p = 1.0 / (1.0 + np.exp(-OUTSIDE_WINDOW_LOGIT))
+    np.testing.assert_allclose(got[0][1][outside], outside_p, rtol=1e-5)

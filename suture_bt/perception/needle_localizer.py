@@ -75,9 +75,13 @@ from suture_bt.perception.spread_limits import (  # noqa: F401 - the limits, re-
     MAX_ANGLE_STD_DEG_UNAIDED,
     check_spread_in_tissue,
 )
+from suture_bt.perception.stereo_window import right_window
 from suture_bt.perception.stray_pieces import stray_pieces, without
 from suture_bt.perception.tissue_slide import check_tissue_slide, tissue_slide
 
+#: Left coarse probability over which a pixel may be needle the right eye's window must hold
+#: (below the masks' own threshold: the window errs wide).
+WINDOW_THRESHOLD = 0.1
 #: The fit searches no nearer than this share of the nearest stereo depth (keypoints', masks').
 NEAR_SLACK = 0.7
 
@@ -127,6 +131,9 @@ class NeedleLocalizer:
         #: The last call's network output (coarse probabilities, scale), kept whether or not
         #: it answered: a refusal still says where in the images needle was seen.
         self.last_network: tuple[np.ndarray, float] | None = None
+        #: Whether the right eye is read only where the left eye's needle can appear
+        #: (:mod:`~suture_bt.perception.stereo_window`).
+        self.window_right = True
 
     @property
     def tissue(self) -> Callable[[np.ndarray], np.ndarray] | None:
@@ -147,7 +154,14 @@ class NeedleLocalizer:
     def network(self, left: np.ndarray, right: np.ndarray):
         """Coarse mask probabilities (2, h, w), keypoints (2, 2, 2) in full-res px, scores,
         full px per coarse px (:func:`~.network_reading.read_network`)."""
-        return read_network(self.net, left, right, self.input_width)
+        window = self._right_window if self.window_right else None
+        return read_network(self.net, left, right, self.input_width, window)
+
+    def _right_window(self, prob_left, scale, input_scale, shape):
+        """The right eye's network window (:func:`~.stereo_window.right_window`)."""
+        depths = (MIN_DEPTH, MAX_DEPTH)
+        threshold = WINDOW_THRESHOLD
+        return right_window(prob_left, scale, self.stereo, depths, threshold, input_scale, shape)
 
     def plausible(self, kp: np.ndarray, score: np.ndarray, prob=None, scale: float = 1.0):
         """``score`` with a keypoint zeroed where an eye's two lie farther apart than the

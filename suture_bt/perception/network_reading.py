@@ -32,25 +32,60 @@ def net_input(rgb: np.ndarray, width: int) -> tuple[np.ndarray, float]:
     return small, s
 
 
-def read_network(net, left: np.ndarray, right: np.ndarray, width: int):
+def read_network(net, left: np.ndarray, right: np.ndarray, width: int, right_window=None):
     """Coarse mask probabilities (2, h, w), keypoints (2 eyes, 2 ends, 2) in full-resolution
-    px, their scores (2, 2), and full px per coarse px; ValueError for a malformed image."""
+    px, their scores (2, 2), and full px per coarse px; ValueError for a malformed image.
+
+    ``right_window`` (optional: left coarse probabilities, full px per coarse px, input px per
+    full px, image shape → a :class:`~.stereo_window.Window` or None) reads the right eye only
+    in that window (:mod:`~.stereo_window`); outside it the right eye sees no needle."""
     for name, img in (("left", left), ("right", right)):
         if img is None or img.ndim != 3 or img.shape[2] != 3 or img.size == 0:
             shape = None if img is None else img.shape
             raise ValueError(f"{name} image must be H×W×3 RGB, got {shape}")
     a, s = net_input(left, width)
-    b, _ = net_input(right, width)
-    x = torch.from_numpy(np.stack([a, b])).permute(0, 3, 1, 2).float().div_(255.0)
-    x = x.contiguous(memory_format=torch.channels_last)
     with torch.inference_mode():
         # One eye at a time: the same outputs as one batch of both (bitwise), faster on a CPU
         # (one eye's activations stay in cache: 28 against 36 ms).
-        out = torch.cat([net(x[i : i + 1]) for i in range(len(x))])
+        out_left = net(_tensor(a))
+        win = None
+        if right_window is not None:
+            prob_left = torch.sigmoid(out_left[0, 0]).numpy()
+            win = right_window(prob_left, OUTPUT_STRIDE / s, s, left.shape[:2])
+        if win is None:
+            out_right = net(_tensor(net_input(right, width)[0]))
+        else:
+            out_right = _read_window(net, right, s, win, out_left.shape)
+        out = torch.cat([out_left, out_right])
     prob = torch.sigmoid(out[:, 0]).numpy()
     kp, score = decode_ends(out[:, 1], out[:, 2])
     kp_full = ((kp + 0.5) * OUTPUT_STRIDE) / s - 0.5
     return prob, kp_full, score, OUTPUT_STRIDE / s
+
+
+#: Logit of the right eye's outputs outside its window (probability about 1e-13).
+OUTSIDE_WINDOW_LOGIT = -30.0
+
+
+def _tensor(img: np.ndarray) -> torch.Tensor:
+    x = torch.from_numpy(img[None]).permute(0, 3, 1, 2).float().div_(255.0)
+    return x.contiguous(memory_format=torch.channels_last)
+
+
+def _read_window(net, img: np.ndarray, s: float, win, shape) -> torch.Tensor:
+    """The network's output for ``img`` read only in ``win`` (full px, on the network's grid),
+    set into an output of ``shape`` that is OUTSIDE_WINDOW_LOGIT elsewhere."""
+    crop = img[win.y0 : min(win.y1, img.shape[0]), win.x0 : win.x1]
+    small = cv2.resize(crop, None, fx=s, fy=s, interpolation=cv2.INTER_AREA)
+    h, w = int(round((win.y1 - win.y0) * s)), int(round((win.x1 - win.x0) * s))
+    if small.shape[0] < h:  # the window runs past the bottom: the whole image's padded rows
+        small = np.concatenate([small, np.zeros((h - small.shape[0], w, 3), small.dtype)], 0)
+    got = net(_tensor(small))
+    out = torch.full(shape, OUTSIDE_WINDOW_LOGIT, dtype=got.dtype)
+    r0, c0 = int(round(win.y0 * s / OUTPUT_STRIDE)), int(round(win.x0 * s / OUTPUT_STRIDE))
+    rows = min(got.shape[2], shape[2] - r0)
+    out[:, :, r0 : r0 + rows, c0 : c0 + got.shape[3]] = got[:, :, :rows]
+    return out
 
 
 def plausible_scores(
