@@ -75,7 +75,7 @@ from suture_bt.perception.spread_limits import (  # noqa: F401 - the limits, re-
     MAX_ANGLE_STD_DEG_UNAIDED,
     check_spread_in_tissue,
 )
-from suture_bt.perception.stereo_window import right_window
+from suture_bt.perception.stereo_window import Window, right_window
 from suture_bt.perception.stray_pieces import stray_pieces, without
 from suture_bt.perception.tissue_slide import check_tissue_slide, tissue_slide
 
@@ -157,7 +157,9 @@ class NeedleLocalizer:
         window = self._right_window if self.window_right else None
         return read_network(self.net, left, right, self.input_width, window)
 
-    def _right_window(self, prob_left, scale, input_scale, shape):
+    def _right_window(
+        self, prob_left: np.ndarray, scale: float, input_scale: float, shape: tuple[int, int]
+    ) -> Window | None:
         """The right eye's network window (:func:`~.stereo_window.right_window`)."""
         depths = (MIN_DEPTH, MAX_DEPTH)
         threshold = WINDOW_THRESHOLD
