@@ -10,7 +10,7 @@ import torch
 
 from suture_bt.interfaces import StereoCameraModel
 from suture_bt.perception.needle_masks import MAX_DEPTH, MIN_DEPTH
-from suture_bt.perception.network import OUTPUT_STRIDE, decode_ends
+from suture_bt.perception.network import OUTPUT_STRIDE, decode_ends, to_input
 
 #: A keypoint heatmap peak below this probability is not trusted (the mask's ends are used).
 MIN_KEYPOINT_SCORE = 0.15
@@ -57,6 +57,7 @@ def read_network(net, left: np.ndarray, right: np.ndarray, width: int, right_win
         else:
             out_right = _read_window(net, right, s, win, out_left.shape)
         out = torch.cat([out_left, out_right])
+    # Over both eyes at once, as before the window: the same bits as the answers measured.
     prob = torch.sigmoid(out[:, 0]).numpy()
     kp, score = decode_ends(out[:, 1], out[:, 2])
     kp_full = ((kp + 0.5) * OUTPUT_STRIDE) / s - 0.5
@@ -68,18 +69,16 @@ OUTSIDE_WINDOW_LOGIT = -30.0
 
 
 def _tensor(img: np.ndarray) -> torch.Tensor:
-    x = torch.from_numpy(img[None]).permute(0, 3, 1, 2).float().div_(255.0)
-    return x.contiguous(memory_format=torch.channels_last)
+    """The network's input tensor (1, 3, H, W) for an RGB image, in channels-last memory."""
+    return to_input(img).contiguous(memory_format=torch.channels_last)
 
 
 def _read_window(net, img: np.ndarray, s: float, win, shape) -> torch.Tensor:
     """The network's output for ``img`` read only in ``win`` (full px, on the network's grid),
     set into an output of ``shape`` that is OUTSIDE_WINDOW_LOGIT elsewhere."""
     crop = img[win.y0 : min(win.y1, img.shape[0]), win.x0 : win.x1]
-    small = cv2.resize(crop, None, fx=s, fy=s, interpolation=cv2.INTER_AREA)
-    h, w = int(round((win.y1 - win.y0) * s)), int(round((win.x1 - win.x0) * s))
-    if small.shape[0] < h:  # the window runs past the bottom: the whole image's padded rows
-        small = np.concatenate([small, np.zeros((h - small.shape[0], w, 3), small.dtype)], 0)
+    # At the bottom the window runs past the image: net_input pads it as it pads the whole.
+    small, _ = net_input(crop, int(round((win.x1 - win.x0) * s)))
     got = net(_tensor(small))
     out = torch.full(shape, OUTSIDE_WINDOW_LOGIT, dtype=got.dtype)
     r0, c0 = int(round(win.y0 * s / OUTPUT_STRIDE)), int(round(win.x0 * s / OUTPUT_STRIDE))

@@ -61,8 +61,9 @@ def right_window(
     ys, xs = np.nonzero(left_prob > threshold)
     if not len(xs):
         return None
-    u0, u1 = (xs.min() + 0.0) * scale - 0.5, (xs.max() + 1.0) * scale - 0.5
-    v0, v1 = (ys.min() + 0.0) * scale - 0.5, (ys.max() + 1.0) * scale - 0.5
+    # Coarse pixel i covers full pixels i * scale - 0.5 to (i + 1) * scale - 0.5.
+    u0, u1 = xs.min() * scale - 0.5, (xs.max() + 1) * scale - 0.5
+    v0, v1 = ys.min() * scale - 0.5, (ys.max() + 1) * scale - 0.5
     corners = np.array([[u0, v0], [u1, v0], [u0, v1], [u1, v1]])
     rays = pixel_rays(stereo.left, corners)  # unit rays (left camera frame)
     pts = [rays * (z / rays[:, 2:3]) for z in depth_range]
