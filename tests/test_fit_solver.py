@@ -1,9 +1,16 @@
-"""The solver's compiled pieces: the damped Levenberg-Marquardt step and the robust cost."""
+"""The solver's compiled pieces: the damped Levenberg-Marquardt step, the extra terms' normal
+equations and the robust cost."""
 
 import numpy as np
 import pytest
 
-from suture_bt.perception.fit_solver import damped_steps, robust_cost
+from suture_bt.perception.fit_solver import (
+    FD_STEPS,
+    _irls_weights,
+    _with_extra_terms,
+    damped_steps,
+    robust_cost,
+)
 
 
 def _gauss_newton(seed: int, k: int = 12) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
@@ -37,3 +44,26 @@ def test_the_robust_cost_is_the_weighted_mean_loss_and_inf_where_undefined():
     assert robust_cost(r, 2.0, None, "geman_mcclure")[0] == pytest.approx(gm.mean())
     assert robust_cost(r, 1.0)[1] == np.inf
     assert robust_cost(r[None], 1.0).shape == (1, 2)  # any leading shape
+
+
+@pytest.mark.parametrize("code, loss", [(0, "cauchy"), (1, "geman_mcclure")])
+def test_the_extra_terms_add_their_weighted_difference_jacobian_to_the_normal_equations(code, loss):
+    A, g, _ = _gauss_newton(5, k=4)
+    rng = np.random.default_rng(6)
+    rx = rng.normal(size=(4, 9)) * 3.0
+    E6 = rx[:, None, :] + rng.normal(size=(4, 6, 9)) * FD_STEPS[None, :, None]
+    rx[1, 2] = np.nan  # an undefined residual counts 0 (its weight and derivatives too)
+    E6[2, 3, 4] = np.inf  # an undefined stepped residual: that derivative counts 0
+    w_col = rng.uniform(0.5, 2.0, 9)
+    A2, g2 = _with_extra_terms(A, g, rx, E6, w_col, FD_STEPS, 1.5, code)
+    # The same sums in numpy (the solver's formula before it was compiled).
+    w = w_col * _irls_weights(rx, 1.5, loss)
+    w = np.where(np.isfinite(w), w, 0.0)
+    r = np.where(np.isfinite(rx), rx, 0.0)
+    J = (E6 - r[:, None]) / FD_STEPS[None, :, None]
+    J = np.where(np.isfinite(J), J, 0.0)
+    Jw = J * w[:, None, :]
+    np.testing.assert_allclose(A2, A + Jw @ J.transpose(0, 2, 1), rtol=1e-12, atol=1e-9)
+    np.testing.assert_allclose(g2, g + (Jw @ r[..., None])[..., 0], rtol=1e-12, atol=1e-9)
+    assert np.isfinite(A2).all() and np.isfinite(g2).all()
+    assert not np.shares_memory(A2, A)  # the edge part is left as it was

@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+import math
+
 import numpy as np
 from numba import njit
 
@@ -40,6 +42,40 @@ def robust_cost(
     c = 0.5 * sigma**2 * (np.log1p(x2) if loss == "cauchy" else x2 / (1.0 + x2))
     out = c.mean(-1) if weights is None else (c * weights).sum(-1) / weights.sum()
     return np.where(np.isfinite(out), out, np.inf)
+
+
+_LOSS_CODES = {loss: code for code, loss in enumerate(LOSSES)}
+
+
+@njit(cache=True)
+def _with_extra_terms(A_edge, g_edge, rx, E6, extra_w, steps, sigma, loss_code):
+    """The normal equations (K, 6, 6), (K, 6) of the edge residuals plus the extra terms':
+    residuals rx (K, M) at the poses, E6 (K, 6, M) at the poses stepped by ``steps``, their
+    derivatives by differences, each weighed by ``extra_w`` and the loss's IRLS weight
+    (an undefined residual, weight or derivative counts 0)."""
+    K, M = rx.shape
+    n = steps.shape[0]
+    A = A_edge.copy()
+    g = g_edge.copy()
+    J = np.empty(n)
+    for k in range(K):
+        for m in range(M):
+            r = rx[k, m]
+            q = 1.0 + (r / sigma) ** 2
+            w = extra_w[m] * (1.0 / q if loss_code == 0 else 1.0 / (q * q))
+            if not math.isfinite(w):
+                w = 0.0
+            if not math.isfinite(r):
+                r = 0.0
+            for i in range(n):
+                d = (E6[k, i, m] - r) / steps[i]
+                J[i] = d if math.isfinite(d) else 0.0
+            for i in range(n):
+                wi = w * J[i]
+                g[k, i] += wi * r
+                for j in range(n):
+                    A[k, i, j] += wi * J[j]
+    return A, g
 
 
 @njit(cache=True)
@@ -122,25 +158,30 @@ def levenberg_marquardt(
     def with_steps(x, stepped: bool = True):
         """Poses of x and of x stepped by FD_STEPS in each parameter, in one batch (each
         pose's bits do not depend on its batch): (K, 4, 4), (K, 6, 4, 4), and the extra
-        terms' residuals at the stepped poses (K, 6, M) (None without extra terms or
-        ``stepped``: the last trial's derivatives are never used)."""
+        terms' residuals at the poses (K, M) and at the stepped poses (K, 6, M), also in one
+        batch (None without extra terms; the stepped ones also without ``stepped``: the last
+        trial's derivatives are never used)."""
         P = params_to_pose(x[:, None, :] + _STEPS[None], cam, model)
+        T = np.ascontiguousarray(P[:, 0])
         if not stepped:
-            return np.ascontiguousarray(P[:, 0]), None, None
-        E6 = extra_residuals(P[:, 1:].reshape(-1, 4, 4)).reshape(K, 6, -1) if extras else None
-        return np.ascontiguousarray(P[:, 0]), P[:, 1:], E6
+            return T, None, (extra_residuals(T) if extras else None), None
+        if not extras:
+            return T, P[:, 1:], None, None
+        E = extra_residuals(P.reshape(-1, 4, 4)).reshape(K, 7, -1)
+        return T, P[:, 1:], E[:, 0], E[:, 1:]
 
-    def evaluate(T, T6, theta=None, cs=None):
-        """Residuals (edge, then extra), nearest angles with their cos and sin, and the edge
-        normal equations."""
+    def evaluate(T, T6, E, theta=None, cs=None):
+        """Residuals (edge, then the extra ones E), nearest angles with their cos and sin,
+        and the edge normal equations."""
         r, th, cs, A, g = edge_normal_equations(
             T, T6, FD_STEPS, rays, model, sigma, loss, theta, cs
         )
-        return (np.concatenate([r, extra_residuals(T)], 1) if extras else r), th, cs, A, g
+        return (np.concatenate([r, E], 1) if extras else r), th, cs, A, g
 
-    T, T6, E6 = with_steps(x)
-    r, theta, cs, A_edge, g_edge = evaluate(T, T6)
+    T, T6, E, E6 = with_steps(x)
+    r, theta, cs, A_edge, g_edge = evaluate(T, T6, E)
     cost = robust_cost(r, sigma, colw, loss)
+    code = _LOSS_CODES[loss]
     lam = np.full(K, 1e-2)
     for it in range(iters):
         if not np.isfinite(cost).any():
@@ -149,19 +190,12 @@ def levenberg_marquardt(
         if extras:
             # The extra terms' part: derivatives by differences (the stepped poses' residuals
             # were made with the trial poses of the previous iteration).
-            rx = r[:, n_edge:]
-            w = extra_w * _irls_weights(rx, sigma, loss)
-            w = np.where(np.isfinite(w), w, 0.0)
-            rx = np.where(np.isfinite(rx), rx, 0.0)
-            J = (E6 - rx[:, None]) / FD_STEPS[None, :, None]
-            J = np.where(np.isfinite(J), J, 0.0)
-            Jw = J * w[:, None, :]
-            A = A + Jw @ J.transpose(0, 2, 1)
-            g = g + (Jw @ rx[..., None])[..., 0]
+            rx = np.ascontiguousarray(r[:, n_edge:])
+            A, g = _with_extra_terms(A, g, rx, E6, extra_w, FD_STEPS, sigma, code)
         xn = x + damped_steps(A, g, lam)
         last = it == iters - 1  # its trial's residuals decide; its derivatives are unused
-        Tn, T6n, E6n = with_steps(xn, stepped=not last)
-        rn, thn, csn, An, gn = evaluate(Tn, T6n, theta, cs)
+        Tn, T6n, En, E6n = with_steps(xn, stepped=not last)
+        rn, thn, csn, An, gn = evaluate(Tn, T6n, En, theta, cs)
         cn = robust_cost(rn, sigma, colw, loss)
         better = cn < cost
         if last:
