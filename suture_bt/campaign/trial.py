@@ -38,9 +38,10 @@ def single_thread() -> None:
     results identical whichever backend (and however many cores) runs them."""
     os.environ.setdefault("OMP_NUM_THREADS", "1")
     import cv2
-    import torch
 
-    torch.set_num_threads(1)
+    from suture_bt.compute_threads import set_compute_threads
+
+    set_compute_threads(1)  # torch's and numba's (numba's pool would undo torch's alone)
     cv2.setNumThreads(1)
 
 

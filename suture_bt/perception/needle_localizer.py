@@ -27,8 +27,8 @@ import time
 from collections.abc import Callable, Sequence
 
 import numpy as np
-import torch
 
+from suture_bt.compute_threads import set_compute_threads
 from suture_bt.geometry import NeedleModel
 from suture_bt.interfaces import StereoCameraModel
 from suture_bt.perception.answer_gates import AnswerGates
@@ -117,7 +117,7 @@ class NeedleLocalizer:
         self.model = model or NeedleModel()
         self.net = frozen_for_inference(net if net is not None else load_network(weights))
         if threads is not None:
-            torch.set_num_threads(threads)
+            set_compute_threads(threads)
         self.rule = rule or ColourRule()
         self.use_free_space = use_free_space
         self.gates = gates or AnswerGates()
