@@ -89,6 +89,10 @@ def summary(rows: list[dict]) -> dict:
     walls = [r["wall_ms"] for r in rows if "wall_ms" in r]
     if walls:
         out["wall_ms_p95"] = float(np.percentile(walls, 95))
+    best = [r["best_ms"] for r in rows if "best_ms" in r]
+    if best:
+        out["best_ms_p95"] = float(np.percentile(best, 95))
+        out["repeat_differs"] = sum(bool(r.get("repeat_differs")) for r in rows)
     out["prior_refusals"] = sum(
         1 for r in rows if not r["found"] and "no fitted pose" in r.get("reason", "")
     )

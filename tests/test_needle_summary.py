@@ -37,3 +37,15 @@ def test_summary_counts_refusals_as_failures_and_by_kind():
     assert set(by_vis) == {"0.00-0.60", "0.80-0.97"}
     assert by_vis["0.00-0.60"]["success_rate"] == 0.0 and by_vis["0.00-0.60"]["not_found"] == 1
     assert by_vis["0.80-0.97"]["success_rate"] == 1.0
+    assert "best_ms_p95" not in s  # only from repeated calls
+
+
+def test_summary_gives_the_p95_of_each_frames_fastest_call_and_counts_differing_repeats():
+    rows = [
+        {"found": False, "scenario": "free", "visible": 0.5, "reason": "sees no needle",
+         "wall_ms": 100.0 + i, "best_ms": float(i), "repeat_differs": i == 3}
+        for i in range(21)
+    ]  # fmt: skip
+    s = needle_summary.summary(rows)
+    assert s["best_ms_p95"] == 19.0 and s["wall_ms_p95"] == 119.0
+    assert s["repeat_differs"] == 1
