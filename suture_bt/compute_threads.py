@@ -1,10 +1,10 @@
 """One thread count for both compute pools of a process: torch's and numba's.
 
-Both use OpenMP, and in this environment they share one OpenMP runtime: numba's first
-parallel call sets its thread count (every core) for the whole process, so a
-``torch.set_num_threads(n)`` made before it is silently undone. The network's outputs
-depend on torch's thread count (how a convolution's sums are split: about 1e-6 in its
-probabilities), so a count that changes with the machine's cores changes a run's bits.
+Both use GNU OpenMP. Observed here: once torch has run, numba's first parallel loop sets the
+thread count torch reads to numba's own (every core), so a ``torch.set_num_threads(n)`` made
+before it is silently undone (torch.get_num_threads() 1 → 2 on this 2-core machine). The
+network's outputs depend on torch's thread count (how a convolution's sums are split: up to
+7e-7 in its probabilities), so a count that follows the machine's cores changes a run's bits.
 """
 
 from __future__ import annotations
