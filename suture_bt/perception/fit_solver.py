@@ -9,7 +9,7 @@ from numba import njit
 
 from suture_bt.geometry import NeedleModel
 from suture_bt.interfaces import StereoCameraModel
-from suture_bt.perception.edge_kernel import edge_normal_equations
+from suture_bt.perception.edge_kernel import _LOSS_CODES, edge_normal_equations
 from suture_bt.perception.edge_residuals import EdgeRays, edge_jacobian, residuals
 from suture_bt.perception.needle_projection import params_to_pose
 from suture_bt.perception.prior_term import PriorTerm, prior_information
@@ -44,15 +44,13 @@ def robust_cost(
     return np.where(np.isfinite(out), out, np.inf)
 
 
-_LOSS_CODES = {loss: code for code, loss in enumerate(LOSSES)}
-
-
 @njit(cache=True)
 def _with_extra_terms(A_edge, g_edge, rx, E6, extra_w, steps, sigma, loss_code):
     """The normal equations (K, 6, 6), (K, 6) of the edge residuals plus the extra terms':
     residuals rx (K, M) at the poses, E6 (K, 6, M) at the poses stepped by ``steps``, their
     derivatives by differences, each weighed by ``extra_w`` and the loss's IRLS weight
-    (an undefined residual, weight or derivative counts 0)."""
+    (:func:`_irls_weights`; an undefined residual, weight or derivative counts 0). Not the
+    edge kernel's compiled weight: that one may fuse multiply-adds, which moves the bits."""
     K, M = rx.shape
     n = steps.shape[0]
     A = A_edge.copy()
