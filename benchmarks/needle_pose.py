@@ -180,12 +180,7 @@ def _localize_row(loc, left, right, T_true, priors, repeat: int = 1) -> dict:
     without the machine's other load), ``repeat_differs`` whether any repeat answered
     otherwise (it must not: the localiser is deterministic)."""
     row: dict = {"prior": [type(p).__name__ for p in priors]}
-    t0 = time.perf_counter()
-    try:
-        est = loc.localize(left, right, priors=priors)
-    except NeedleNotFound as exc:
-        est, reason = None, exc.reason
-    wall = _ms(t0)
+    est, reason, wall = _timed_call(loc, left, right, priors)
     if repeat > 1:
         row |= _repeats(loc, left, right, priors, repeat - 1, est, wall)
     if est is None:
@@ -216,20 +211,25 @@ def _localize_row(loc, left, right, T_true, priors, repeat: int = 1) -> dict:
     }
 
 
+def _timed_call(loc, left, right, priors) -> tuple:
+    """One localiser call: (estimate or None, the refusal's reason or None, wall ms)."""
+    t0 = time.perf_counter()
+    try:
+        return loc.localize(left, right, priors=priors), None, _ms(t0)
+    except NeedleNotFound as exc:
+        return None, exc.reason, _ms(t0)
+
+
 def _repeats(loc, left, right, priors, n: int, est, wall: float) -> dict:
     """``best_ms`` over the first call (``est``, ``wall`` ms) and ``n`` more, and whether any
     of them answered otherwise (``repeat_differs``)."""
     best, differs = wall, False
     for _ in range(n):
-        t0 = time.perf_counter()
-        try:
-            again = loc.localize(left, right, priors=priors).T_cam_needle
-        except NeedleNotFound:
-            again = None
-        best = min(best, _ms(t0))
+        again, _, ms = _timed_call(loc, left, right, priors)
+        best = min(best, ms)
         if (again is None) != (est is None):
             differs = True
-        elif again is not None and not np.array_equal(again, est.T_cam_needle):
+        elif again is not None and not np.array_equal(again.T_cam_needle, est.T_cam_needle):
             differs = True
     return {"best_ms": best, "repeat_differs": differs}
 
