@@ -2,15 +2,20 @@
 
 from __future__ import annotations
 
-import math
-
 import numpy as np
-from numba import njit
 
 from suture_bt.geometry import NeedleModel
 from suture_bt.interfaces import StereoCameraModel
 from suture_bt.perception.edge_kernel import _LOSS_CODES, edge_normal_equations
 from suture_bt.perception.edge_residuals import EdgeRays, edge_jacobian, residuals
+from suture_bt.perception.lm_step import (  # noqa: F401 - re-exported
+    _with_extra_terms,
+    compiled_terms,
+    damped_steps,
+    lm_trial,
+    start_thread_pool,
+    trial_arrays,
+)
 from suture_bt.perception.needle_projection import params_to_pose
 from suture_bt.perception.prior_term import PriorTerm, prior_information
 
@@ -42,81 +47,6 @@ def robust_cost(
     c = 0.5 * sigma**2 * (np.log1p(x2) if loss == "cauchy" else x2 / (1.0 + x2))
     out = c.mean(-1) if weights is None else (c * weights).sum(-1) / weights.sum()
     return np.where(np.isfinite(out), out, np.inf)
-
-
-@njit(cache=True)
-def _with_extra_terms(A_edge, g_edge, rx, E6, extra_w, steps, sigma, loss_code):
-    """The normal equations (K, 6, 6), (K, 6) of the edge residuals plus the extra terms':
-    residuals rx (K, M) at the poses, E6 (K, 6, M) at the poses stepped by ``steps``, their
-    derivatives by differences, each weighed by ``extra_w`` and the loss's IRLS weight
-    (:func:`_irls_weights`; an undefined residual, weight or derivative counts 0). Not the
-    edge kernel's compiled weight: that one may fuse multiply-adds, which moves the bits."""
-    K, M = rx.shape
-    n = steps.shape[0]
-    A = A_edge.copy()
-    g = g_edge.copy()
-    J = np.empty(n)
-    for k in range(K):
-        for m in range(M):
-            r = rx[k, m]
-            q = 1.0 + (r / sigma) ** 2
-            w = extra_w[m] * (1.0 / q if loss_code == 0 else 1.0 / (q * q))
-            if not math.isfinite(w):
-                w = 0.0
-            if not math.isfinite(r):
-                r = 0.0
-            for i in range(n):
-                d = (E6[k, i, m] - r) / steps[i]
-                J[i] = d if math.isfinite(d) else 0.0
-            for i in range(n):
-                wi = w * J[i]
-                g[k, i] += wi * r
-                for j in range(n):
-                    A[k, i, j] += wi * J[j]
-    return A, g
-
-
-@njit(cache=True)
-def damped_steps(A: np.ndarray, g: np.ndarray, lam: np.ndarray) -> np.ndarray:
-    """Levenberg-Marquardt steps -(A + λ (diag A + 1e-9))⁻¹ g per row (K, 6, 6), (K, 6), (K,),
-    by Cholesky (A is a Gauss-Newton matrix, so the damped one is positive definite); NaN
-    where it is not (the trial then costs inf and the row's damping grows)."""
-    K, n = g.shape
-    out = np.empty((K, n))
-    L = np.empty((n, n))
-    y = np.empty(n)
-    for k in range(K):
-        ok = True
-        for i in range(n):
-            for j in range(i + 1):
-                v = A[k, i, j]
-                if i == j:
-                    v += lam[k] * (A[k, i, i] + 1e-9)
-                for m in range(j):
-                    v -= L[i, m] * L[j, m]
-                if i == j:
-                    if not v > 0.0:
-                        ok = False
-                        break
-                    L[i, i] = np.sqrt(v)
-                else:
-                    L[i, j] = v / L[j, j]
-            if not ok:
-                break
-        if not ok:
-            out[k] = np.nan
-            continue
-        for i in range(n):  # L y = -g
-            v = -g[k, i]
-            for m in range(i):
-                v -= L[i, m] * y[m]
-            y[i] = v / L[i, i]
-        for i in range(n - 1, -1, -1):  # Lᵀ x = y
-            v = y[i]
-            for m in range(i + 1, n):
-                v -= L[m, i] * out[k, m]
-            out[k, i] = v / L[i, i]
-    return out
 
 
 def _pose_derivatives(x: np.ndarray, T: np.ndarray, cam, model: NeedleModel):
@@ -176,10 +106,15 @@ def levenberg_marquardt(
         )
         return (np.concatenate([r, E], 1) if extras else r), th, cs, A, g
 
+    code = _LOSS_CODES[loss]
+    compiled = compiled_terms(extras, stereo, model)
+    if compiled is not None:
+        return _compiled_lm(
+            x, trial_arrays(rays, stereo, model, compiled), iters, sigma, colw, loss
+        )
     T, T6, E, E6 = with_steps(x)
     r, theta, cs, A_edge, g_edge = evaluate(T, T6, E)
     cost = robust_cost(r, sigma, colw, loss)
-    code = _LOSS_CODES[loss]
     lam = np.full(K, 1e-2)
     for it in range(iters):
         if not np.isfinite(cost).any():
@@ -214,6 +149,57 @@ def levenberg_marquardt(
             cs[:, better] = csn[:, better]
             if extras:
                 E6[better] = E6n[better]
+        lam = np.where(better, lam / 3.0, lam * 4.0)
+        lam = np.clip(lam, 1e-7, 1e7)
+    return x, cost
+
+
+_NO_THETA = np.zeros((0, 0))
+_NO_CS = np.zeros((2, 0, 0))
+
+
+def _compiled_lm(x, fixed, iters: int, sigma: float, colw, loss: str):
+    """:func:`levenberg_marquardt`'s loop with each trial one compiled call
+    (:func:`~.lm_step.lm_trial`, ``fixed`` from :func:`~.lm_step.trial_arrays`): the same
+    trials, costs and choices, without the glue between the kernels."""
+    start_thread_pool()
+    K = len(x)
+    code = _LOSS_CODES[loss]
+    n_extra = fixed[4][10]
+    extra_w = np.ascontiguousarray(colw[len(colw) - n_extra :])
+    lam = np.full(K, 1e-2)
+    first = (np.zeros((K, 6, 6)), np.zeros((K, 6)), np.zeros((K, 0)), np.zeros((K, 6, 0)))
+    x, T, T6, E6, r, theta, cs, A_edge, g_edge = lm_trial(
+        x, False, *first, extra_w, lam, FD_STEPS, sigma, code, True, _NO_THETA, _NO_CS, fixed
+    )
+    cost = robust_cost(r, sigma, colw, loss)
+    for it in range(iters):
+        if not np.isfinite(cost).any():
+            break
+        last = it == iters - 1  # its trial's residuals decide; its derivatives are unused
+        xn, Tn, T6n, E6n, rn, thn, csn, An, gn = lm_trial(
+            x, True, A_edge, g_edge, r, E6, extra_w, lam, FD_STEPS, sigma, code, not last,
+            theta, cs, fixed,
+        )  # fmt: skip
+        cn = robust_cost(rn, sigma, colw, loss)
+        better = cn < cost
+        if last:
+            x[better], cost[better] = xn[better], cn[better]
+            break
+        if better.all():
+            x, T, r, theta, cost, cs = xn, Tn, rn, thn, cn, csn
+            A_edge, g_edge, T6, E6 = An, gn, T6n, E6n
+        elif better.any():
+            x[better], T[better], r[better], theta[better], cost[better] = (
+                xn[better],
+                Tn[better],
+                rn[better],
+                thn[better],
+                cn[better],
+            )
+            A_edge[better], g_edge[better], T6[better] = An[better], gn[better], T6n[better]
+            cs[:, better] = csn[:, better]
+            E6[better] = E6n[better]
         lam = np.where(better, lam / 3.0, lam * 4.0)
         lam = np.clip(lam, 1e-7, 1e7)
     return x, cost

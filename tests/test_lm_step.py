@@ -1,0 +1,122 @@
+"""The compiled LM trial gives the bits of the separate kernels it replaces: the extra terms'
+residuals, and whole LM runs with every term the fit uses, with and without the tissue's cut;
+a term without a compiled form takes the uncompiled path."""
+
+import subprocess
+import sys
+from pathlib import Path
+
+import numpy as np
+import pytest
+from test_pose_fit import _scene_1080p
+
+from suture_bt.geometry import NeedleModel
+from suture_bt.perception import fit_solver
+from suture_bt.perception.edge_residuals import edge_rays
+from suture_bt.perception.fit_solver import levenberg_marquardt
+from suture_bt.perception.fit_terms import EndPriorTerm
+from suture_bt.perception.lm_step import _extra_residuals, compiled_terms
+from suture_bt.perception.mask_view import edge_points
+from suture_bt.perception.needle_prior import HeldPrior, PortPrior
+from suture_bt.perception.needle_projection import (
+    params_to_pose,
+    pose_to_params,
+    project_cam,
+    transform_points,
+)
+from suture_bt.perception.prior_term import HeldPlaceTerm, PriorTerm
+from suture_bt.perception.tissue_cut import TissueCut
+
+MODEL = NeedleModel()
+
+
+def _problem(cut: bool):
+    """A 1080p needle's edge rays (optionally cut by a surface plane at 110° of arc), starts
+    scattered about it, and the fit's terms: keypoints, a held place, a port."""
+    st, T, left, right, _ = _scene_1080p(7, 0.0)
+    rays = edge_rays(st, edge_points(left)[::3], edge_points(right)[::3])
+    if cut:
+        theta = np.radians(110.0)
+        point = T[:3, :3] @ MODEL.point_at(theta) + T[:3, 3]
+        normal = T[:3, :3] @ np.array([np.sin(theta), -np.cos(theta), 0.0])
+        rays.cut = TissueCut.from_ports([(point, normal)], np.eye(4), MODEL)
+    rng = np.random.default_rng(1)
+    x = pose_to_params(T[None], st.left, MODEL) + rng.normal(0, [2, 2, 2, 2, 0.05, 0.2], (8, 6))
+    ends = np.stack([MODEL.base, MODEL.tip])
+    kps = [project_cam(c, transform_points(c.T_cam_world @ st.left.T_world_cam @ T, ends))
+           for c in (st.left, st.right)]  # fmt: skip
+    T_world = st.left.T_world_cam @ T
+    a = MODEL.tip_angle + 0.6
+    pinch = T_world[:3, :3] @ MODEL.point_at(a) + T_world[:3, 3]
+    port = T_world[:3, :3] @ MODEL.point_at(a + 0.8) + T_world[:3, 3]
+    priors = [HeldPrior("psm1", pinch, 0.001, arc_angle=a), PortPrior("exit1", port, 0.003)]
+    keypoints = EndPriorTerm(st, MODEL, (kps[0][:1] + 1.5, kps[1]))
+    place = HeldPlaceTerm(priors, st.left.T_cam_world, MODEL)
+    points = PriorTerm(priors, st.left.T_cam_world, MODEL)
+    return st, rays, x, [keypoints, place, points]
+
+
+def test_the_extra_residuals_are_the_terms_own_bits():
+    st, _, x, terms = _problem(cut=False)
+    steps = np.concatenate([np.zeros((1, 6)), np.diag(fit_solver.FD_STEPS)])
+    T = params_to_pose(x[:, None] + steps[None], st.left, MODEL).reshape(-1, 4, 4)
+    arrays = compiled_terms(terms, st, MODEL)
+    E = _extra_residuals(T, arrays, MODEL.radius, MODEL.tip_angle, MODEL.base_angle)
+    own = np.concatenate([t(T) for t in terms], 1)
+    assert E.shape == own.shape == (len(T), 3 + 1 + 2 * 3 + 1)
+    assert np.array_equal(E, own)
+
+
+@pytest.mark.parametrize("cut", [False, True])
+@pytest.mark.parametrize("loss", ["cauchy", "geman_mcclure"])
+@pytest.mark.parametrize("n_terms", [0, 1, 3])
+def test_a_compiled_lm_run_is_the_uncompiled_one_bit_for_bit(cut, loss, n_terms, monkeypatch):
+    st, rays, x, terms = _problem(cut)
+    terms = terms[:n_terms]
+    fast = levenberg_marquardt(x, rays, st, MODEL, 6, 1.0, terms, loss)
+    monkeypatch.setattr(fit_solver, "compiled_terms", lambda *a: None)
+    slow = levenberg_marquardt(x, rays, st, MODEL, 6, 1.0, terms, loss)
+    assert np.array_equal(fast[0], slow[0]) and np.array_equal(fast[1], slow[1])
+    assert np.isfinite(fast[1]).all()
+    if n_terms:  # the terms count: without them the run ends elsewhere
+        bare = levenberg_marquardt(x, rays, st, MODEL, 6, 1.0, [], loss)
+        assert not np.array_equal(bare[0], fast[0])
+
+
+class _Flat:
+    """A term with no compiled form: a constant residual per pose."""
+
+    def __bool__(self):
+        return True
+
+    def __call__(self, T):
+        return np.ones((len(T), 1))
+
+    def column_weights(self, n_edge):
+        return np.ones(1)
+
+
+def test_a_term_without_a_compiled_form_takes_the_uncompiled_path():
+    st, rays, x, terms = _problem(cut=False)
+    assert compiled_terms([terms[0], _Flat()], st, MODEL) is None
+    xs, cost = levenberg_marquardt(x, rays, st, MODEL, 3, 1.0, [_Flat()])
+    assert xs.shape == x.shape and np.isfinite(cost).all()
+
+
+_FRESH = """
+import sys
+sys.path.insert(0, {tests!r})
+from test_lm_step import MODEL, _problem
+from suture_bt.perception.fit_solver import levenberg_marquardt
+st, rays, x, terms = _problem(True)
+print(levenberg_marquardt(x, rays, st, MODEL, 2, 1.0, terms)[1].shape)
+"""
+
+
+def test_a_fresh_process_whose_first_parallel_kernel_is_the_cached_trial_runs_it():
+    """The trial's parallel kernels, loaded from numba's cache (the tests above compiled it)
+    in a process where no parallel kernel had run yet, crashed until the pool was started."""
+    code = _FRESH.format(tests=str(Path(__file__).parent))
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True)
+    assert out.returncode == 0, out.stderr[-2000:]
+    assert out.stdout.strip().splitlines()[-1] == "(8,)"
