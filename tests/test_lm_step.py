@@ -60,7 +60,7 @@ def test_the_extra_residuals_are_the_terms_own_bits():
     st, _, x, terms = _problem(cut=False)
     steps = np.concatenate([np.zeros((1, 6)), np.diag(fit_solver.FD_STEPS)])
     T = params_to_pose(x[:, None] + steps[None], st.left, MODEL).reshape(-1, 4, 4)
-    arrays = compiled_terms(terms, st, MODEL)
+    arrays = compiled_terms(terms, MODEL)
     E = _extra_residuals(T, arrays, MODEL.radius, MODEL.tip_angle, MODEL.base_angle)
     own = np.concatenate([t(T) for t in terms], 1)
     assert E.shape == own.shape == (len(T), 3 + 1 + 2 * 3 + 1)
@@ -98,7 +98,7 @@ class _Flat:
 
 def test_a_term_without_a_compiled_form_takes_the_uncompiled_path():
     st, rays, x, terms = _problem(cut=False)
-    assert compiled_terms([terms[0], _Flat()], st, MODEL) is None
+    assert compiled_terms([terms[0], _Flat()], MODEL) is None
     xs, cost = levenberg_marquardt(x, rays, st, MODEL, 3, 1.0, [_Flat()])
     assert xs.shape == x.shape and np.isfinite(cost).all()
 

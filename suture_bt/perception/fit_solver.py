@@ -71,7 +71,9 @@ def levenberg_marquardt(
     ``extra`` (a term or a list of terms: ``term(T) -> (K, M)`` residuals in px, and
     ``term.column_weights(n_edge)``) adds residuals (free space, keypoint prior) to the edge
     residuals. The edge residuals and their normal equations come from the compiled loop
-    (:mod:`edge_kernel`); the extra terms' derivatives are finite differences.
+    (:mod:`edge_kernel`); the extra terms' derivatives are finite differences. When every
+    extra term has a compiled form, each trial is one compiled call (:mod:`lm_step`), with
+    the same bits.
     """
     x = np.array(x, dtype=float)
     cam = stereo.left
@@ -107,7 +109,7 @@ def levenberg_marquardt(
         return (np.concatenate([r, E], 1) if extras else r), th, cs, A, g
 
     code = _LOSS_CODES[loss]
-    compiled = compiled_terms(extras, stereo, model)
+    compiled = compiled_terms(extras, model)
     if compiled is not None:
         return _compiled_lm(
             x, trial_arrays(rays, stereo, model, compiled), iters, sigma, colw, loss

@@ -119,7 +119,7 @@ def start_thread_pool() -> None:
     numba.get_num_threads()
 
 
-def compiled_terms(extras: list, stereo: StereoCameraModel, model: NeedleModel):
+def compiled_terms(extras: list, model: NeedleModel):
     """The extra terms as the plain arrays the compiled trial reads, in their column order:
     (blocks (B, 3): kind, first index, count; eye transforms (E, 4, 4), eye intrinsics (E, 4),
     keypoints (·, 2) with each eye's row offsets (E + 1,), the model's ends for the keypoints,
