@@ -111,100 +111,89 @@ def levenberg_marquardt(
     code = _LOSS_CODES[loss]
     compiled = compiled_terms(extras, model)
     if compiled is not None:
-        return _compiled_lm(
-            x, trial_arrays(rays, stereo, model, compiled), iters, sigma, colw, loss
-        )
-    T, T6, E, E6 = with_steps(x)
-    r, theta, cs, A_edge, g_edge = evaluate(T, T6, E)
-    cost = robust_cost(r, sigma, colw, loss)
-    lam = np.full(K, 1e-2)
-    for it in range(iters):
-        if not np.isfinite(cost).any():
-            break
-        A, g = A_edge, g_edge
-        if extras:
-            # The extra terms' part: derivatives by differences (the stepped poses' residuals
-            # were made with the trial poses of the previous iteration).
-            rx = np.ascontiguousarray(r[:, n_edge:])
-            A, g = _with_extra_terms(A, g, rx, E6, extra_w, FD_STEPS, sigma, code)
-        xn = x + damped_steps(A, g, lam)
-        last = it == iters - 1  # its trial's residuals decide; its derivatives are unused
-        Tn, T6n, En, E6n = with_steps(xn, stepped=not last)
-        rn, thn, csn, An, gn = evaluate(Tn, T6n, En, theta, cs)
-        cn = robust_cost(rn, sigma, colw, loss)
-        better = cn < cost
-        if last:
-            x[better], cost[better] = xn[better], cn[better]
-            break
-        if better.all():  # every trial taken (common early on): no row-wise copies
-            x, T, r, theta, cost, cs = xn, Tn, rn, thn, cn, csn
-            A_edge, g_edge, T6, E6 = An, gn, T6n, E6n
-        elif better.any():
-            x[better], T[better], r[better], theta[better], cost[better] = (
-                xn[better],
-                Tn[better],
-                rn[better],
-                thn[better],
-                cn[better],
+        start_thread_pool()
+        fixed = trial_arrays(rays, stereo, model, compiled)
+        w = np.ascontiguousarray(colw[n_edge:])
+
+        def trial(x, state, lam, stepped, theta=_NO_THETA, cs=_NO_CS):
+            """One compiled trial (:func:`~.lm_step.lm_trial`); ``state`` None: no step."""
+            step = state is not None
+            A, g, r, E6 = state if step else _no_step(len(x))
+            return lm_trial(
+                x, step, A, g, r, E6, w, lam, FD_STEPS, sigma, code, stepped, theta, cs, fixed
             )
-            A_edge[better], g_edge[better], T6[better] = An[better], gn[better], T6n[better]
-            cs[:, better] = csn[:, better]
-            if extras:
-                E6[better] = E6n[better]
-        lam = np.where(better, lam / 3.0, lam * 4.0)
-        lam = np.clip(lam, 1e-7, 1e7)
-    return x, cost
+
+    else:
+
+        def trial(x, state, lam, stepped, theta=None, cs=None):
+            """The same trial from the separate kernels (a term without a compiled form)."""
+            if state is not None:
+                A, g, r, E6 = state
+                if extras:
+                    # The extra terms' part: derivatives by differences (the stepped poses'
+                    # residuals were made with the trial poses of the previous iteration).
+                    rx = np.ascontiguousarray(r[:, n_edge:])
+                    A, g = _with_extra_terms(A, g, rx, E6, extra_w, FD_STEPS, sigma, code)
+                x = x + damped_steps(A, g, lam)
+            T, T6, E, E6 = with_steps(x, stepped)
+            return (x, T, T6, E6, *evaluate(T, T6, E, theta, cs))
+
+    return _lm_loop(x, trial, iters, sigma, colw, loss)
 
 
 _NO_THETA = np.zeros((0, 0))
 _NO_CS = np.zeros((2, 0, 0))
 
 
-def _compiled_lm(x, fixed, iters: int, sigma: float, colw, loss: str):
-    """:func:`levenberg_marquardt`'s loop with each trial one compiled call
-    (:func:`~.lm_step.lm_trial`, ``fixed`` from :func:`~.lm_step.trial_arrays`): the same
-    trials, costs and choices, without the glue between the kernels."""
-    start_thread_pool()
-    K = len(x)
-    code = _LOSS_CODES[loss]
-    n_extra = fixed[4][10]
-    extra_w = np.ascontiguousarray(colw[len(colw) - n_extra :])
-    lam = np.full(K, 1e-2)
-    first = (np.zeros((K, 6, 6)), np.zeros((K, 6)), np.zeros((K, 0)), np.zeros((K, 6, 0)))
-    x, T, T6, E6, r, theta, cs, A_edge, g_edge = lm_trial(
-        x, False, *first, extra_w, lam, FD_STEPS, sigma, code, True, _NO_THETA, _NO_CS, fixed
-    )
+def _no_step(K: int) -> tuple:
+    """Normal equations, residuals and stepped extra residuals of no step (typed for numba)."""
+    return np.zeros((K, 6, 6)), np.zeros((K, 6)), np.zeros((K, 0)), np.zeros((K, 6, 0))
+
+
+def _lm_loop(x: np.ndarray, trial, iters: int, sigma: float, colw, loss: str):
+    """Levenberg-Marquardt over the rows of x: each iteration's ``trial`` (x, (A, g, r, E6) of
+    the current poses or None for no step, damping, whether the stepped poses are wanted,
+    nearest arc angles with their cos and sin) → (x, T, T6, E6, r, θ, cos and sin, A, g) is
+    taken where it lowers a row's robust cost; (x, cost)."""
+    lam = np.full(len(x), 1e-2)
+    x, T, T6, E6, r, theta, cs, A_edge, g_edge = trial(x, None, lam, True)
     cost = robust_cost(r, sigma, colw, loss)
     for it in range(iters):
         if not np.isfinite(cost).any():
             break
         last = it == iters - 1  # its trial's residuals decide; its derivatives are unused
-        xn, Tn, T6n, E6n, rn, thn, csn, An, gn = lm_trial(
-            x, True, A_edge, g_edge, r, E6, extra_w, lam, FD_STEPS, sigma, code, not last,
-            theta, cs, fixed,
-        )  # fmt: skip
+        xn, Tn, T6n, E6n, rn, thn, csn, An, gn = trial(
+            x, (A_edge, g_edge, r, E6), lam, not last, theta, cs
+        )
         cn = robust_cost(rn, sigma, colw, loss)
         better = cn < cost
         if last:
             x[better], cost[better] = xn[better], cn[better]
             break
-        if better.all():
-            x, T, r, theta, cost, cs = xn, Tn, rn, thn, cn, csn
-            A_edge, g_edge, T6, E6 = An, gn, T6n, E6n
-        elif better.any():
-            x[better], T[better], r[better], theta[better], cost[better] = (
-                xn[better],
-                Tn[better],
-                rn[better],
-                thn[better],
-                cn[better],
-            )
-            A_edge[better], g_edge[better], T6[better] = An[better], gn[better], T6n[better]
-            cs[:, better] = csn[:, better]
-            E6[better] = E6n[better]
+        x, T, T6, E6, r, theta, cs, A_edge, g_edge, cost = _take_better(
+            better,
+            (x, T, T6, E6, r, theta, cs, A_edge, g_edge, cost),
+            (xn, Tn, T6n, E6n, rn, thn, csn, An, gn, cn),
+        )
         lam = np.where(better, lam / 3.0, lam * 4.0)
         lam = np.clip(lam, 1e-7, 1e7)
     return x, cost
+
+
+def _take_better(better: np.ndarray, state: tuple, trial: tuple) -> tuple:
+    """The LM state (x, T, T6, E6, r, θ, cos and sin, A, g, cost) with the rows whose trial was
+    cheaper (``better``) taken from ``trial`` (the same fields; cos and sin hold their rows
+    second; E6 None: no extra terms). Every trial taken (common early on): the trial itself,
+    without row-wise copies."""
+    if better.all():
+        return trial
+    if better.any():
+        for i, (old, new) in enumerate(zip(state, trial, strict=True)):
+            if i == 6:
+                old[:, better] = new[:, better]
+            elif old is not None:
+                old[better] = new[better]
+    return state
 
 
 def pose_uncertainty(
