@@ -8,7 +8,7 @@ from suture_bt.geometry import NeedleModel
 from suture_bt.interfaces import StereoCameraModel
 from suture_bt.perception.edge_kernel import _LOSS_CODES, edge_normal_equations
 from suture_bt.perception.edge_residuals import EdgeRays, edge_jacobian, residuals
-from suture_bt.perception.lm_step import (  # noqa: F401 - re-exported
+from suture_bt.perception.lm_step import (
     _with_extra_terms,
     compiled_terms,
     damped_steps,
