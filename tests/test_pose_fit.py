@@ -1,6 +1,8 @@
 """The stereo pose fit recovers known poses from exact synthetic masks, with and without
 occlusion, and fails with NeedleNotFound on an empty mask."""
 
+from pathlib import Path
+
 import numpy as np
 import pytest
 from perception_helpers import pose_errors, random_needle_pose, stereo
@@ -380,7 +382,7 @@ def test_stray_mask_pixels_do_not_pull_the_final_choice_off_the_needle():
     assert pos < 0.3 and ang < 1.0
 
 
-def test_a_second_search_from_the_best_poses_own_ends_finds_the_mirror_twin():
+def test_a_second_search_from_the_best_poses_own_ends_finds_the_mirror_twin(monkeypatch):
     """Tip hidden, started from the visible piece with a misleading alternative: the first
     search settles on the tilt-mirror twin (about 2 radii away, a worse cost); searching again
     from that pose's own end pixels and depth finds the needle (to the objective's own
@@ -395,7 +397,15 @@ def test_a_second_search_from_the_best_poses_own_ends_finds_the_mirror_twin():
     res = PoseFitter(st, MODEL, probe_twin=False).fit(*occ, short, alternatives=alt)
     pos, ang = pose_errors(res.T_cam_needle, T)
     assert pos < 1.0 and ang < 4.0 and res.cost < first.cost
-    # The caller can say no end is hidden: then no second search (and no slide).
+    # The caller can say no end is hidden: the second search still runs, for the best pose's
+    # ends lie far from the keypoints (RESEED_MOVED_PX), but no slide probe does.
+    told = PoseFitter(st, MODEL, probe_twin=False).fit(
+        *occ, short, alternatives=alt, hidden_end=False
+    )
+    pos, ang = pose_errors(told.T_cam_needle, T)
+    assert pos < 1.0 and ang < 4.0
+    # Then with ends that may move anywhere, no second search (and no slide).
+    monkeypatch.setattr(pose_fit, "RESEED_MOVED_PX", float("inf"))
     told = PoseFitter(st, MODEL, probe_twin=False).fit(
         *occ, short, alternatives=alt, hidden_end=False
     )
@@ -426,3 +436,49 @@ def test_a_close_rival_also_seeds_the_second_search(monkeypatch, ratio, n_seeds)
     # One call for the main hypothesis, one per alternative, then the reseeds.
     assert len(calls) == 2 + n_seeds
     assert all(h is not None for h in calls[2:])
+
+
+def _keypoint_on_bulge():
+    """Session 39's wrong SRC answer (report seed 54059973, ``unoccluded`` #52), as the fit
+    saw it: the localiser's masks of a free needle 139 mm away seen nearly end-on, its left
+    keypoints (one on the arc's bulge, 36 px from either end), the mask's geodesic ends as the
+    alternative, the end priors and the depth range."""
+    d = np.load(Path(__file__).parent / "fixtures" / "needle_fits" / "keypoint_on_bulge.npz")
+    views = tuple(
+        MaskView(d[f"{e}_mask"], tuple(int(v) for v in d[f"{e}_origin"])) for e in ("left", "right")
+    )
+    fitter = PoseFitter(stereo(1920, 1080), MODEL)
+    fitter.depth_range = tuple(float(v) for v in d["depth_range"])
+    kwargs = dict(
+        depth_hint=float(d["depth_hint"]),
+        alternatives=[tuple(d["alternative"])],
+        end_priors=(d["end_priors_left"], d["end_priors_right"]),
+        hidden_end=False,
+    )
+    return fitter, (*views, tuple(d["keypoints"])), kwargs, d["T_cam_needle_true"]
+
+
+def test_a_best_pose_far_from_the_keypoints_is_searched_again_from_its_own_ends(monkeypatch):
+    """No end is hidden, but the best pose's ends lie far from the keypoints (one sat on the
+    bulge): the second search from its own ends runs and finds the needle. Without it the
+    answer is 13.8 deg tilted (after the base-tip swap) at 1.7x the needle's cost."""
+    fitter, args, kwargs, T = _keypoint_on_bulge()
+    calls = []
+    original = PoseFitter._starts
+
+    def spy(self, ub, ut, depth_hint):
+        calls.append(depth_hint)
+        return original(self, ub, ut, depth_hint)
+
+    monkeypatch.setattr(PoseFitter, "_starts", spy)
+    fit = fitter.fit(*args, **kwargs)
+    # The keypoints, the alternative, then the best pose's own ends (and its close rival's).
+    assert len(calls) >= 3 and all(h is not None for h in calls[2:])
+    pos, ang = pose_errors(fit.T_cam_needle, T)
+    assert pos < 0.5 and ang < 0.5
+    monkeypatch.setattr(pose_fit, "RESEED_MOVED_PX", float("inf"))
+    calls.clear()
+    first = fitter.fit(*args, **kwargs)
+    assert len(calls) == 2
+    _, ang_swapped = pose_errors(first.T_cam_needle, MODEL.swapped(T))
+    assert ang_swapped > 10.0 and first.cost > 1.5 * fit.cost

@@ -84,6 +84,16 @@ from suture_bt.perception.tissue_cut import TissueCut
 #: A clearly different second-stage pose costing at most this much more than the best also
 #: seeds the second search (1.3 gave the same answers on the benchmarks for 10 ms more).
 RESEED_RIVAL_RATIO = 1.1
+#: The search is repeated from the best pose's own ends (``n_reseed``) also when no end is
+#: thought hidden but those ends lie farther than this (px) from the first hypothesis's (the
+#: keypoints): one keypoint sat elsewhere on the wire, and the best pose grew from another
+#: hypothesis's start without the fresh grid of plane angles at its own ends. Session 39's one
+#: wrong SRC answer (report seed 54059973, ``unoccluded`` #52: a free needle seen nearly
+#: end-on 139 mm away, one keypoint on the arc's bulge 36 px from either end, answered
+#: 1.22 mm / 167.7 deg off: 13.8 deg after the base-tip swap, at 1.7x the cost of the truth
+#: polished) is then answered 0.31 mm / 0.12 deg off; of the other 645 cached development
+#: calls it changes none by more than 1e-6 mm or deg.
+RESEED_MOVED_PX = 8.0
 
 
 @dataclass
@@ -273,7 +283,14 @@ class PoseFitter:
         if hidden_end is None:
             hidden_end = bool(alternatives)
         hidden_end = hidden_end or bool(priors)
-        if self.n_reseed and hidden_end and np.isfinite(c).any():
+        # The first hypothesis's ends (the keypoints) far from the best pose's: one of them sat
+        # elsewhere on the wire, and the best pose came from another hypothesis's start.
+        led_away = (
+            not hidden_end
+            and bool(tried)
+            and self._best_ends_moved(x, c, tried[0]) > RESEED_MOVED_PX
+        )
+        if self.n_reseed and (hidden_end or led_away) and np.isfinite(c).any():
             # The best pose's own end pixels and depth are sharper than any keypoint: a fresh
             # grid of plane angles there reaches the tilt-mirror twin the first starts missed.
             # A close rival's ends may be the right ones: it seeds the search too.
@@ -372,6 +389,14 @@ class PoseFitter:
         """World poses (K, 4, 4) of parameter rows (priors are in the world frame)."""
         cam = self.stereo.left
         return cam.T_world_cam[None] @ params_to_pose(x, cam, self.model)
+
+    def _best_ends_moved(self, x: np.ndarray, cost: np.ndarray, ends) -> float:
+        """How far (px) the cheapest row's end pixels lie from the hypothesis ``ends``
+        (:func:`~.fit_starts.ends_moved`; 0 when no row is finite)."""
+        if not np.isfinite(cost).any():
+            return 0.0
+        T = params_to_pose(x[[int(np.argmin(cost))]], self.stereo.left, self.model)[0]
+        return ends_moved(np.asarray(end_pixels(self.stereo.left, T, self.model)), [ends])
 
     def _diverse(self, x: np.ndarray, cost: np.ndarray, n: int) -> np.ndarray:
         """:func:`~.fit_starts.diverse` with this fitter's camera and model."""
