@@ -109,7 +109,7 @@ def _images_with_cover(st, full, seen, px: int = 6):
     return tuple(out)
 
 
-def test_the_mirror_twin_of_a_needle_behind_a_jaw_runs_over_background():
+def test_the_mirror_twin_of_a_needle_behind_a_jaw_runs_over_background(monkeypatch):
     """test_needle_prior's twin case: the tip half behind a jaw (grey, just over the hidden
     wire), the fit without priors answers the tilt-mirror twin > 10 mm off: the needle's
     unseen part is under the jaw, the twin's lies over the black background."""
@@ -119,7 +119,7 @@ def test_the_mirror_twin_of_a_needle_behind_a_jaw_runs_over_background():
     from suture_bt.perception.exposure_gate import MAX_EXPOSED
     from suture_bt.perception.pose_fit import PoseFitter
 
-    st, T, occ, short, kw = _twin_case()
+    st, T, occ, short, kw = _twin_case(monkeypatch)
     _, _, left, right, _ = _scene_1080p(10, 0.0)
     imgs = _images_with_cover(st, (left, right), occ, px=2)
     # The twin the fit answers without its rival probe (with it, the fit moves to a cheaper
