@@ -6,9 +6,9 @@ same end pixels, slides along its own circle (when an end is hidden), small turn
 rival probe. The first three replace the answer when they find a cheaper pose (they are never
 its rivals); the twin's poses also stay among the candidates when costlier, so a twin of
 near-equal cost is a tie (TWIN_TIES); the rival probe's poses are kept as rivals, which the
-refusal gates weigh. Then
-the probed answer is taken back through the search's own wide stage (:func:`wide_redescent`);
-a cheaper result replaces it, and the probes run again from it when it moved.
+refusal gates weigh. Then the probed answer is taken back through the search's own wide stage
+(:func:`wide_redescent`); a cheaper result replaces it, and the probes run again from it when
+it moved.
 """
 
 from __future__ import annotations
