@@ -121,8 +121,9 @@ class PoseFitter:
     #: Clearly different solutions (> DISTINCT apart) polished on every edge point.
     n_final: int = 2
     #: Starts of a second search from the best second-stage pose's own end pixels and depth
-    #: (0: none), made when an end may be hidden (see ``fit``); as many again from a clearly
-    #: different rival within RESEED_RIVAL_RATIO of its cost.
+    #: (0: none), made when an end may be hidden (see ``fit``) or the best pose's ends lie
+    #: over RESEED_MOVED_PX from the first hypothesis; as many again from a clearly different
+    #: rival within RESEED_RIVAL_RATIO of its cost.
     #: 1080p occluded benchmark: success 0.690 -> 0.735 (seed 1000), 0.735 -> 0.785 (2000);
     #: the rival's seeds: 0.745 -> 0.750, 0.77 -> 0.70 mm, 9.6 -> 7.4 deg (seed 1000),
     #: 0.795 -> 0.800, 0.92 -> 0.89 mm (seed 2000), for about 3 ms; 12 instead of 6 starts
@@ -182,7 +183,8 @@ class PoseFitter:
         ``end_priors`` (left, right pixel arrays) are keypoints the network is sure of: each
         pulls the nearer model end towards it (:class:`EndPriorTerm`). ``hidden_end`` says
         whether an end may be hidden (then the search is repeated from the best pose's own
-        ends, ``n_reseed``); None: whenever there are ``alternatives``.
+        ends, ``n_reseed``, as it also is when those ends lie over RESEED_MOVED_PX from the
+        first hypothesis); None: whenever there are ``alternatives``.
 
         ``alternatives`` are further end-pixel hypotheses (``None``: the mask's own farthest
         pair), searched over all depths; the best ``n_keep_alternative`` starts of each join
