@@ -414,14 +414,9 @@ def test_a_second_search_from_the_best_poses_own_ends_finds_the_mirror_twin(monk
     assert pos < 1.0 and ang < 4.0
 
 
-@pytest.mark.parametrize("ratio, n_seeds", [(0.0, 1), (1e6, 2)])
-def test_a_close_rival_also_seeds_the_second_search(monkeypatch, ratio, n_seeds):
-    """The second search starts from the best second-stage pose's ends and depth, and also
-    from a clearly different rival's when that costs at most RESEED_RIVAL_RATIO times more."""
-    st, T, left, right, ends = _scene_1080p(10, 0.0)
-    occ, short, _ = _tip_hidden(st, T, left, right, ends)
-    alt = [tuple(ends + np.array([[30.0, 10.0], [-20.0, 25.0]]))]
-    monkeypatch.setattr(pose_fit, "RESEED_RIVAL_RATIO", ratio)
+def _spy_on_starts(monkeypatch) -> list:
+    """The depth hints of every end hypothesis the fitter makes starts for, in order (a list
+    that fills as fits run)."""
     calls = []
     original = PoseFitter._starts
 
@@ -430,6 +425,18 @@ def test_a_close_rival_also_seeds_the_second_search(monkeypatch, ratio, n_seeds)
         return original(self, ub, ut, depth_hint)
 
     monkeypatch.setattr(PoseFitter, "_starts", spy)
+    return calls
+
+
+@pytest.mark.parametrize("ratio, n_seeds", [(0.0, 1), (1e6, 2)])
+def test_a_close_rival_also_seeds_the_second_search(monkeypatch, ratio, n_seeds):
+    """The second search starts from the best second-stage pose's ends and depth, and also
+    from a clearly different rival's when that costs at most RESEED_RIVAL_RATIO times more."""
+    st, T, left, right, ends = _scene_1080p(10, 0.0)
+    occ, short, _ = _tip_hidden(st, T, left, right, ends)
+    alt = [tuple(ends + np.array([[30.0, 10.0], [-20.0, 25.0]]))]
+    monkeypatch.setattr(pose_fit, "RESEED_RIVAL_RATIO", ratio)
+    calls = _spy_on_starts(monkeypatch)
     PoseFitter(st, MODEL).fit(*occ, short, alternatives=alt)
     # One call for the main hypothesis, one per alternative, then the reseeds.
     assert len(calls) == 2 + n_seeds
@@ -443,14 +450,7 @@ def test_a_best_pose_far_from_the_keypoints_is_searched_again_from_its_own_ends(
     # Session 39's wrong SRC answer (report seed 54059973, ``unoccluded`` #52) as the fit saw
     # it: a free needle 139 mm away seen nearly end-on, one keypoint 36 px from either end.
     fitter, args, kwargs, T = recorded_fit("keypoint_on_bulge")
-    calls = []
-    original = PoseFitter._starts
-
-    def spy(self, ub, ut, depth_hint):
-        calls.append(depth_hint)
-        return original(self, ub, ut, depth_hint)
-
-    monkeypatch.setattr(PoseFitter, "_starts", spy)
+    calls = _spy_on_starts(monkeypatch)
     fit = fitter.fit(*args, **kwargs)
     # The keypoints, the alternative, then the best pose's own ends (and its close rival's).
     assert len(calls) >= 3 and all(h is not None for h in calls[2:])
