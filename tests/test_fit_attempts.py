@@ -2,6 +2,8 @@
 reasons, a clean outline is answered, and an answer whose ends moved far from every
 hypothesis is refit from them."""
 
+from dataclasses import replace
+
 import numpy as np
 import pytest
 from perception_helpers import pose_errors, stereo
@@ -149,3 +151,16 @@ def test_no_refit_where_an_end_may_be_hidden(monkeypatch):
     calls.clear()
     attempts(*args)
     assert calls == [False, False]  # the fit, then its refit from its own ends
+
+
+def test_a_refit_that_finds_the_same_pose_again_keeps_the_first_fits_rival():
+    """The refit from the answer's own ends may land on the same pose, cheaper by rounding
+    alone, with no close rival of its own: the first fit's rival still stands (which of the
+    two is cheaper is a coin toss that differed between two installs of the same code)."""
+    st, T, args = _args()
+    fit = _attempts(st)(*args)
+    first = replace(fit, rival_ratio=1.1, rival_offset=(1.0, 20.0))
+    again = replace(fit, cost=fit.cost * (1.0 - 1e-9), rival_ratio=float("inf"), rival_offset=None)
+    kept = _attempts(st)._refit_from_own_ends(first, lambda main, alternatives: again)
+    assert kept.cost == again.cost
+    assert kept.rival_ratio == 1.1 and kept.rival_offset == (1.0, 20.0)

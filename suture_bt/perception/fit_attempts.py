@@ -202,6 +202,9 @@ class FitAttempts:
             return fit
         poses = np.stack([again.T_cam_needle, fit.T_cam_needle])
         ratio = tie_ratio(0, poses, np.array([again.cost, fit.cost]), np.ones(2, bool), self.model)
+        if not np.isfinite(ratio) and fit.rival_ratio < again.rival_ratio:
+            # The same pose found again (cheaper by rounding): the first fit's rival stands.
+            return replace(again, rival_ratio=fit.rival_ratio, rival_offset=fit.rival_offset)
         if not ratio < again.rival_ratio:
             return again
         return replace(again, rival_ratio=ratio, rival_offset=pose_offset(poses[1], poses[0]))
