@@ -192,7 +192,8 @@ class FitAttempts:
     def _refit_from_own_ends(self, fit: PoseFitResult, attempt) -> PoseFitResult:
         """The cheaper of ``fit`` and a fit from its own end pixels over every depth; a refit
         answer keeps ``fit`` as its rival when clearly different (from it and its base ↔ tip
-        swap), so a view the first fit found ambiguous stays so (the rival gate)."""
+        swap), and ``fit``'s own rival when it is the same pose found again, so a view the
+        first fit found ambiguous stays so (the rival gate)."""
         own = tuple(end_pixels(self.stereo.left, fit.T_cam_needle, self.model))
         try:
             again = attempt(own, [])
