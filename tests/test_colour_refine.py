@@ -147,6 +147,18 @@ def test_colour_tests_equal_their_numpy_reductions_on_every_colour():
     np.testing.assert_array_equal(channel_sum(c16), c16.sum(-1))
 
 
+def test_the_integer_colour_test_equals_the_reference_on_every_colour():
+    """8-bit images take the needle colour test in integers; every colour gets the answer
+    of the int16 reference (level as sum / 3.0), at the nominal rule and at scaled ones whose
+    levels fall between integers."""
+    rgb = _every_colour().reshape(4096, 4096, 3)
+    for gain in (1.0, 0.55, 0.4, 0.0):
+        rule = ColourRule().at_exposure(gain)
+        fast = needle_coloured(rgb, rule)
+        reference = needle_coloured(rgb.astype(np.int16), rule)
+        np.testing.assert_array_equal(fast, reference)
+
+
 def test_a_dim_frame_scales_the_level_thresholds_not_the_colour_margins():
     rule = ColourRule()
     assert rule.at_exposure(0.95) is rule and rule.at_exposure(1.7) is rule  # nominal, bright
