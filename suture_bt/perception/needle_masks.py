@@ -4,8 +4,9 @@ pixels at full resolution, with the gate width and depth hint the stereo pair me
 The coarse blob at the trusted keypoints gates a colour test (:mod:`colour_refine`); the
 masks' stereo disparity (:mod:`mask_disparity`) checks the keypoints' depth, the wire's own
 thickness (:mod:`wire_width`) deciding when the two disagree; grey blobs thicker
-than the widest plausible wire (jaws, shaft) are dropped, band pieces a jaw cut off are added
-back (:mod:`needle_ends`), occluder rims are dropped and occluders marked (:mod:`occlusion`).
+than the widest plausible wire (jaws, shaft) are dropped, wire the coarse mask stopped short
+of is added (:mod:`wire_growth`), band pieces a jaw cut off are added back
+(:mod:`needle_ends`), occluder rims are dropped and occluders marked (:mod:`occlusion`).
 """
 
 from __future__ import annotations
@@ -26,6 +27,7 @@ from suture_bt.perception.mask_disparity import mask_disparity
 from suture_bt.perception.needle_ends import with_band_pieces
 from suture_bt.perception.occlusion import with_occluder, without_occluder_rims
 from suture_bt.perception.refusal import NeedleNotFound
+from suture_bt.perception.wire_growth import grown_along_wire
 from suture_bt.perception.wire_width import thin_for
 
 #: Fewest full-resolution needle pixels per eye to attempt a fit.
@@ -116,6 +118,7 @@ class NeedleMasks:
         cams = (self.stereo.left, self.stereo.right)
         for eye, (img, view) in enumerate(zip(images, raw, strict=True)):
             view = drop_thick(view, half_width, self.rule)
+            view = grown_along_wire(img, view, half_width, chord * cams[eye].fx / z_near, self.rule)
             view = with_band_pieces(
                 img,
                 view,
