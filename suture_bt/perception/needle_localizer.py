@@ -134,6 +134,9 @@ class NeedleLocalizer:
         #: Whether the right eye is read only where the left eye's needle can appear
         #: (:mod:`~suture_bt.perception.stereo_window`).
         self.window_right = True
+        #: Whether each eye's mask grows along wire the network's coarse mask stopped short
+        #: of (:mod:`~suture_bt.perception.wire_growth`).
+        self.grow_wire = True
 
     @property
     def tissue(self) -> Callable[[np.ndarray], np.ndarray] | None:
@@ -320,8 +323,14 @@ class NeedleLocalizer:
 
     def _masks(self, images, rule, prob, scale, depth, anchors=(None, None)):
         """:class:`~suture_bt.perception.needle_masks.NeedleMasks` with this localiser's
-        cameras, model, coarse threshold and free-space choice, and the frame's colour rule."""
+        cameras, model, coarse threshold, free-space and wire-growth choices, and the frame's
+        colour rule."""
         masks = NeedleMasks(
-            self.stereo, self.model, rule, self.coarse_threshold, self.use_free_space
+            self.stereo,
+            self.model,
+            rule,
+            self.coarse_threshold,
+            self.use_free_space,
+            self.grow_wire,
         )
         return masks(images, prob, scale, depth, anchors)

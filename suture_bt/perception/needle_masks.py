@@ -63,6 +63,8 @@ class NeedleMasks:
     #: Whether to attach each view's free-space distance transform (the fit's experimental
     #: free-space term).
     use_free_space: bool = False
+    #: Whether wire the coarse mask stopped short of is added (:mod:`wire_growth`).
+    grow_wire: bool = True
 
     def __call__(self, images, prob, scale, depth, anchors=(None, None)):
         """Both eyes' refined needle masks, the depth hint for the fit, the gate (px) and the
@@ -118,7 +120,9 @@ class NeedleMasks:
         cams = (self.stereo.left, self.stereo.right)
         for eye, (img, view) in enumerate(zip(images, raw, strict=True)):
             view = drop_thick(view, half_width, self.rule)
-            view = grown_along_wire(img, view, half_width, chord * cams[eye].fx / z_near, self.rule)
+            if self.grow_wire:
+                reach = chord * cams[eye].fx / z_near
+                view = grown_along_wire(img, view, half_width, reach, self.rule)
             view = with_band_pieces(
                 img,
                 view,
