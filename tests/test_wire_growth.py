@@ -68,6 +68,15 @@ def test_growth_stops_at_its_reach_and_at_gaps_of_tissue():
     assert near[98:103, 20:81].all() and not near[:, 81:].any()
 
 
+def test_a_wire_running_past_the_reach_ends_the_search_there():
+    """Grey that runs on past the needle's reach (here a non-integer one: the window's last
+    column is its floor) is cut at the reach, and the search for more ends."""
+    img = _scene()  # the wire is 160 px long, far longer than the reach
+    stub = MaskView(np.ones((5, 40), bool), (20, 98))
+    near = _full(grown_along_wire(img, stub, 4.0, 56.5, ColourRule()), img.shape)
+    assert near[98:103, 20:81].all() and not near[:, 81:].any()
+
+
 def _held_wire_eye(eye: str):
     """One eye of a held-out development view (seed 24391302, ``held_start`` #11, held-out
     phantom and light): the needle 37 mm from the eyes, held in a jaw, of which the network's

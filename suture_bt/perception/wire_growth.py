@@ -53,7 +53,7 @@ def grown_along_wire(
     all of its pixels.
 
     Only runs when grey continues where the mask stops (:func:`touches_grey`); the view comes
-    back unchanged otherwise, and with no occluder or free-space fields in any case (they are
+    back unchanged otherwise. A grown view carries no occluder or free-space fields (they are
     marked after this step).
     """
     rule = rule or ColourRule()
@@ -73,6 +73,7 @@ def grown_along_wire(
     )
     # Most views grow a little or nowhere: look in the mask's near surroundings first, and
     # farther only while the grown wire runs out of the window.
+    limit = _window(view, far, rgb.shape)
     margin = 2 * half_width_px + 4
     grown = view
     while True:
@@ -82,36 +83,45 @@ def grown_along_wire(
             max(y0 - margin, far[2]),
             min(y0 + h + margin, far[3]),
         )
-        found, window = _grown(rgb, view, box, half_width_px, rule)
+        window = _window(view, box, rgb.shape)
+        found = _grown(rgb, view, window, half_width_px, rule)
         if found is None:
             return grown
         grown = found
-        if not _runs_out(found, window, far):
+        if not _runs_out(found, window, limit):
             return grown
         margin *= GROWTH_STEP
 
 
-def _runs_out(view: MaskView, window, far) -> bool:
-    """Whether ``view`` reaches a side of ``window`` (a, b, c, d) short of ``far``."""
-    a, b, c, d = window
-    x0, y0 = view.origin
-    h, w = view.mask.shape
-    return (
-        (x0 <= a and a > far[0])
-        or (x0 + w >= b and b < far[1])
-        or (y0 <= c and c > far[2])
-        or (y0 + h >= d and d < far[3])
-    )
-
-
-def _grown(rgb, view: MaskView, box, half_width_px: float, rule: ColourRule):
-    """The view grown within ``box`` (x0, x1, y0, y1; widened to hold the mask, clipped to the
-    image), None when nothing joins it there; and the window (a, b, c, d) searched."""
-    H, W = rgb.shape[:2]
+def _window(view: MaskView, box, shape) -> tuple[int, int, int, int]:
+    """The pixel window (a, b, c, d: columns a..b-1, rows c..d-1) of ``box`` (x0, x1, y0, y1),
+    widened to hold the mask and clipped to the image."""
+    H, W = shape[:2]
     h, w = view.mask.shape
     x0, y0 = view.origin
     a, b = int(max(min(box[0], x0), 0)), int(min(max(box[1], x0 + w), W))
     c, d = int(max(min(box[2], y0), 0)), int(min(max(box[3], y0 + h), H))
+    return a, b, c, d
+
+
+def _runs_out(view: MaskView, window, limit) -> bool:
+    """Whether ``view`` reaches a side of ``window`` short of the same side of ``limit``."""
+    a, b, c, d = window
+    x0, y0 = view.origin
+    h, w = view.mask.shape
+    return (
+        (x0 <= a and a > limit[0])
+        or (x0 + w >= b and b < limit[1])
+        or (y0 <= c and c > limit[2])
+        or (y0 + h >= d and d < limit[3])
+    )
+
+
+def _grown(rgb, view: MaskView, window, half_width_px: float, rule: ColourRule):
+    """The view grown within ``window`` (:func:`_window`); None when nothing joins it there."""
+    a, b, c, d = window
+    h, w = view.mask.shape
+    x0, y0 = view.origin
     own = np.zeros((d - c, b - a), bool)
     own[y0 - c : y0 - c + h, x0 - a : x0 - a + w] = view.mask
     grey = needle_coloured(rgb[c:d, a:b], rule)
@@ -121,16 +131,15 @@ def _grown(rgb, view: MaskView, box, half_width_px: float, rule: ColourRule):
     grown = np.isin(lab, joined[joined > 0])
     ys, xs = np.nonzero(grown)
     if len(xs) == int(view.mask.sum()):
-        return None, (a, b, c, d)
+        return None
     y_lo, y_hi, x_lo, x_hi = ys.min(), ys.max() + 1, xs.min(), xs.max() + 1
-    found = MaskView(grown[y_lo:y_hi, x_lo:x_hi], (a + int(x_lo), c + int(y_lo)))
-    return found, (a, b, c, d)
+    return MaskView(grown[y_lo:y_hi, x_lo:x_hi], (a + int(x_lo), c + int(y_lo)))
 
 
 def _thick(grey: np.ndarray, half_width_px: float) -> np.ndarray:
     """Where ``grey`` is thicker than the wire (jaws, shafts; :func:`remove_thick`), found at
-    half resolution when the wire is at least 8 px wide (a quarter of the cost; the jaw's
-    outline need not be exact, its core is grown past it) and one pixel wider there."""
+    half resolution when the wire may look 8 px wide or more (a quarter of the cost; the
+    jaw's outline need not be exact, its core is grown past it) and one pixel wider there."""
     # Specks that fail the colour test inside a lit jaw face must not make it look thin.
     solid = cv2.morphologyEx(grey.astype(np.uint8), cv2.MORPH_CLOSE, np.ones((3, 3), np.uint8))
     if half_width_px < HALF_RES_MIN_HALF_WIDTH_PX:
