@@ -317,8 +317,8 @@ def test_an_answer_in_a_narrow_basin_is_descended_again_from_the_searchs_wide_st
     the needle's circle, that no probe left (each descends at 1 px); taken back through the
     search's own 3 px stage (``answer_probes.wide_redescent``), it comes 3.0 deg off. Since
     session 41 the mask holds the wire the network's mask stopped short of
-    (:mod:`~suture_bt.perception.wire_growth`), and the search alone answers it 0.04 deg off;
-    the re-descent's case is the record's mask."""
+    (:mod:`~suture_bt.perception.wire_growth`), and it is answered 0.04 deg off without the
+    re-descent; the re-descent's case is the record's mask."""
     stereo_model, left, right, T, priors, tissue = task_scene("held_start", 24, seed=93896709)
     loc = NeedleLocalizer(stereo_model, tissue=tissue)
     loc.fitter.probe_wide = False

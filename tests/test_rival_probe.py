@@ -199,8 +199,8 @@ def test_the_near_probe_takes_a_stopped_fit_into_the_needles_basin():
     without priors the fit used to stop 0.93 mm / 4.95° off at 3.7x the cost of the needle's own
     pose (predicted spread 0.11°); the ±4/8° turns reach that pose. Since session 41 the mask
     holds the wire the network's mask stopped short of
-    (:mod:`~suture_bt.perception.wire_growth`) and the search alone finds the needle; the
-    probe's case is the record's mask."""
+    (:mod:`~suture_bt.perception.wire_growth`) and the fit finds the needle without the near
+    probe; the probe's case is the record's mask."""
     from perception_helpers import task_scene
 
     from suture_bt.perception.needle_localizer import NeedleLocalizer
