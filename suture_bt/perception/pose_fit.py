@@ -14,6 +14,7 @@ sliver of jaw the colour test kept) cannot pull the answer onto a pose that half
 Optional extra terms: free space (experimental, off) and confident keypoints (search only).
 The answer is then probed for a cheaper pose (its depth-mirror twin, slides along its circle,
 small turns) and for a clearly different pose of near-equal cost (:mod:`rival_probe`).
+The starts are :mod:`fit_search`'s, the answer's evidence :mod:`fit_answer`'s.
 """
 
 from __future__ import annotations
@@ -26,7 +27,6 @@ import numpy as np
 from suture_bt.geometry import NeedleModel
 from suture_bt.interfaces import StereoCameraModel
 from suture_bt.perception.answer_probes import probed
-from suture_bt.perception.edge_kernel import edge_normal_equations
 from suture_bt.perception.edge_residuals import (  # noqa: F401 - re-exported
     N_THETA_GRID,
     EdgeRays,
@@ -37,14 +37,10 @@ from suture_bt.perception.edge_residuals import (  # noqa: F401 - re-exported
     nearest_arc_angle,
     residuals,
 )
-from suture_bt.perception.edge_samples import (  # noqa: F401 - mask_ends re-exported
-    balanced,
-    farthest_pair,
-    mask_ends,
-    subsample,
-)
-from suture_bt.perception.entry_starts import entry_starts, seen_at_right_end
+from suture_bt.perception.edge_samples import mask_ends  # noqa: F401 - re-exported
+from suture_bt.perception.fit_answer import answer_result
 from suture_bt.perception.fit_result import PoseFitResult
+from suture_bt.perception.fit_search import StartSearch
 from suture_bt.perception.fit_solver import (  # noqa: F401 - re-exported
     FD_STEPS,
     LOSSES,
@@ -55,7 +51,6 @@ from suture_bt.perception.fit_solver import (  # noqa: F401 - re-exported
 from suture_bt.perception.fit_starts import (
     DISTINCT,
     diverse,
-    ends_moved,
     rot_angle,
     start_params,
 )
@@ -64,7 +59,7 @@ from suture_bt.perception.fit_terms import (  # noqa: F401 - re-exported
     EndPriorTerm,
     FreeSpaceTerm,
 )
-from suture_bt.perception.mask_view import MaskView, edge_points
+from suture_bt.perception.mask_view import MaskView, edge_points  # noqa: F401 - re-exported
 from suture_bt.perception.needle_prior import (
     NeedlePrior,
     choose_answer,
@@ -74,11 +69,10 @@ from suture_bt.perception.needle_prior import (
 from suture_bt.perception.needle_projection import (
     end_pixels,
     params_to_pose,
-    pose_to_params,
 )
-from suture_bt.perception.prior_term import HeldPlaceTerm, PriorTerm
+from suture_bt.perception.prior_term import PriorTerm
 from suture_bt.perception.refusal import NeedleNotFound
-from suture_bt.perception.rival_probe import FitRays, rival, tie_ratio
+from suture_bt.perception.rival_probe import FitRays
 from suture_bt.perception.tissue_cut import TissueCut
 
 #: A clearly different second-stage pose costing at most this much more than the best also
@@ -201,81 +195,12 @@ class PoseFitter:
         seen part (:mod:`tissue_cut`), and the search also starts from the wire entering the
         tissue at an end of the outline (:mod:`entry_starts`).
         """
-        rng = np.random.default_rng(self.seed)
-        el, er = edge_points(left), edge_points(right)
-        if len(el) < self.min_edge_points or len(er) < self.min_edge_points:
-            raise NeedleNotFound(
-                f"too few needle edge points (left {len(el)}, right {len(er)}, "
-                f"need {self.min_edge_points} each)"
-            )
-        el = subsample(el, self.max_points_per_eye, rng)
-        er = subsample(er, self.max_points_per_eye, rng)
-        rays = edge_rays(self.stereo, el, er)
-        # The tissue hides the arc inside it: the known solid, and for a needle in a port the
-        # space below the port's surface.
-        ports = port_planes(priors)
-        rays.cut = TissueCut.from_ports(ports, self.stereo.left.T_cam_world, self.model)
-        nl = len(el)
-        coarse = rays.subset(balanced(nl, len(er), self.coarse_points_per_eye, rng))
-        mid = rays.subset(balanced(nl, len(er), self.mid_points_per_eye, rng))
+        search = StartSearch.begin(self, left, right, end_priors, priors)
+        rays, coarse, mid, terms = search.rays, search.coarse, search.mid, search.terms
         cam = self.stereo.left
         if endpoints_left is None and warm_start is not None:
             endpoints_left = tuple(end_pixels(cam, np.asarray(warm_start), self.model))
-        terms = [FreeSpaceTerm(self.stereo, self.model, (left, right))]
-        if end_priors is not None:
-            terms.append(EndPriorTerm(self.stereo, self.model, end_priors))
-        if priors:
-            terms.append(HeldPlaceTerm(priors, cam.T_cam_world, self.model))
-        terms = [t for t in terms if t]
-        coarse_w = np.concatenate(
-            [np.ones(len(coarse))] + [t.column_weights(len(coarse)) for t in terms]
-        )
-
-        tried = []  # the end-pixel hypotheses searched
-
-        def best_starts(ends, hint, n: int) -> np.ndarray:
-            """The n lowest-cost feasible starts (coarse edge subset) for one end hypothesis."""
-            if ends is None:
-                ends = farthest_pair(el, rng)
-            ub, ut = (np.asarray(e, float) for e in ends)
-            tried.append((ub, ut))
-            return lowest(self._starts(ub, ut, hint), n)
-
-        def lowest(st: np.ndarray, n: int) -> np.ndarray:
-            """The n lowest-cost feasible rows of ``st`` on the coarse edge subset."""
-            T0 = params_to_pose(st, cam, self.model)
-            r0 = edge_normal_equations(
-                T0, None, FD_STEPS, coarse, self.model, 3.0, "cauchy", grid=12
-            )[0]
-            r0 = np.concatenate([r0] + [t(T0) for t in terms], 1)
-            c0 = robust_cost(r0, 3.0, coarse_w)
-            order = np.argsort(c0)[:n]
-            return st[[i for i in order if np.isfinite(c0[i])]]
-
-        parts = [best_starts(endpoints_left, depth_hint, self.n_keep)]
-        parts += [best_starts(e, None, self.n_keep_alternative) for e in alternatives]
-        if warm_start is not None:
-            parts.append(pose_to_params(np.asarray(warm_start)[None], cam, self.model))
-        if seeds is not None and len(seeds):
-            parts.append(lowest(pose_to_params(np.asarray(seeds), cam, self.model), self.n_keep))
-        if self.tissue_solid:
-            cut = self._with_solid(ports)
-            # The solid hides the arc from here on: the image's first starts were chosen
-            # without it (with it, far starts half inside the tissue crowded out the right
-            # ones on development scenes of a free needle). The outline may end where the wire
-            # enters the tissue (own rng: the same draws).
-            rays.cut = coarse.cut = mid.cut = cut
-            own = np.random.default_rng(self.seed + 1)
-            ends, right_ends = farthest_pair(el, own), farthest_pair(er, own)
-            at_end = seen_at_right_end(self.stereo, right_ends)
-            entry = entry_starts(ends, cam, cut, self.model, at_end)
-            if len(entry):
-                parts.append(
-                    lowest(pose_to_params(entry, cam, self.model), self.n_keep_alternative)
-                )
-        starts = np.concatenate(parts)
-        if not len(starts):
-            raise NeedleNotFound("no feasible pose hypothesis from the needle's end points")
+        starts = search.first_starts(endpoints_left, depth_hint, warm_start, alternatives, seeds)
         it1, it2, it3 = self.iterations
         x, c1 = levenberg_marquardt(starts, coarse, self.stereo, self.model, it1, 3.0, terms)
         if self.n_second_stage and len(x) > self.n_second_stage:
@@ -288,22 +213,13 @@ class PoseFitter:
         # The first hypothesis's ends (the keypoints) far from the best pose's: one of them sat
         # elsewhere on the wire, and the best pose came from another hypothesis's start.
         led_away = (
-            not hidden_end
-            and bool(tried)
-            and self._best_ends_moved(x, c, tried[0]) > RESEED_MOVED_PX
+            not hidden_end and bool(search.tried) and search.best_ends_moved(x, c) > RESEED_MOVED_PX
         )
         if self.n_reseed and (hidden_end or led_away) and np.isfinite(c).any():
             # The best pose's own end pixels and depth are sharper than any keypoint: a fresh
             # grid of plane angles there reaches the tilt-mirror twin the first starts missed.
             # A close rival's ends may be the right ones: it seeds the search too.
-            best = self._diverse(x, c, 2)  # rows of x (not the prior ``seeds``)
-            if len(best) > 1 and not c[best[1]] <= RESEED_RIVAL_RATIO * c[best[0]]:
-                best = best[:1]
-            st = []
-            for T_best in params_to_pose(x[best], cam, self.model):
-                ends = tuple(end_pixels(cam, T_best, self.model))
-                st.append(best_starts(ends, float(T_best[2, 3]), self.n_reseed))
-            st = np.concatenate(st)
+            st = search.reseed_starts(x, c, RESEED_RIVAL_RATIO)
             if len(st):
                 y, cy = levenberg_marquardt(st, coarse, self.stereo, self.model, it1, 3.0, terms)
                 y, cy = levenberg_marquardt(y, mid, self.stereo, self.model, it2, 1.0, terms)
@@ -340,36 +256,9 @@ class PoseFitter:
         xf, cf, b, ok, misses, near = probed(
             self, xf, cf, (b, ok, misses), FitRays(rays, coarse, mid), polish, priors, hidden_end
         )
-        poses = params_to_pose(xf, cam, self.model)
-        rival_ratio, rival_offset = rival(b, poses, cf, ok & near)
-        tie = tie_ratio(b, poses, cf, ok, self.model)
-        T = poses[b]
-        r, _ = residuals(T[None], rays, self.model)
-        r = r[0]
-        inl = np.abs(r) < 1.5
-        rms = float(np.sqrt(np.mean(r[inl] ** 2))) if inl.any() else float("inf")
-        ang_std, pos_std = pose_uncertainty(
-            xf[b], rays, self.stereo, self.model, 1.0, self.final_loss, prior_term
-        )
-        return PoseFitResult(
-            T_cam_needle=T,
-            T_world_needle=cam.T_world_cam @ T,
-            params=xf[b],
-            cost=float(cf[b]),
-            rms_px=rms,
-            inlier_fraction=float(inl.mean()),
-            n_edge_points=(len(el), len(er)),
-            ambiguity=amb,
-            candidates=list(poses),
-            candidate_costs=tuple(float(v) for v in cf),
-            angle_std_deg=ang_std,
-            position_std_mm=pos_std,
-            prior_misses=() if misses is None else tuple(float(m) for m in misses[b]),
-            rival_ratio=rival_ratio,
-            rival_offset=rival_offset,
-            tie_ratio=tie,
-            ends_moved_px=ends_moved(np.asarray(end_pixels(cam, T, self.model)), tried),
-        )
+        choice = (b, ok, misses, near)
+        n_edge = (len(search.el), len(search.er))
+        return answer_result(self, xf, cf, choice, rays, prior_term, amb, n_edge, search.tried)
 
     def tissue_cut(self, priors: Sequence[NeedlePrior] = ()) -> TissueCut:
         """Where the tissue hides the arc for a fit with these priors: the known solid (if
@@ -391,14 +280,6 @@ class PoseFitter:
         """World poses (K, 4, 4) of parameter rows (priors are in the world frame)."""
         cam = self.stereo.left
         return cam.T_world_cam[None] @ params_to_pose(x, cam, self.model)
-
-    def _best_ends_moved(self, x: np.ndarray, cost: np.ndarray, ends) -> float:
-        """How far (px) the cheapest row's end pixels lie from the hypothesis ``ends``
-        (:func:`~.fit_starts.ends_moved`; 0 when no row is finite)."""
-        if not np.isfinite(cost).any():
-            return 0.0
-        T = params_to_pose(x[[int(np.argmin(cost))]], self.stereo.left, self.model)[0]
-        return ends_moved(np.asarray(end_pixels(self.stereo.left, T, self.model)), [ends])
 
     def _diverse(self, x: np.ndarray, cost: np.ndarray, n: int) -> np.ndarray:
         """:func:`~.fit_starts.diverse` with this fitter's camera and model."""

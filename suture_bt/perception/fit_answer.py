@@ -1,0 +1,66 @@
+"""The pose fit's result for its chosen answer: the pose with the evidence measured on every
+edge ray (residual, inliers, spread, rival, tie, how far its ends moved). Split from
+:mod:`pose_fit` (one concept a module), which chooses the answer."""
+
+from __future__ import annotations
+
+from typing import Any
+
+import numpy as np
+
+from suture_bt.perception.edge_residuals import EdgeRays, residuals
+from suture_bt.perception.fit_result import PoseFitResult
+from suture_bt.perception.fit_solver import pose_uncertainty
+from suture_bt.perception.fit_starts import ends_moved
+from suture_bt.perception.needle_projection import end_pixels, params_to_pose
+from suture_bt.perception.rival_probe import rival, tie_ratio
+
+
+def answer_result(
+    fitter: Any,
+    xf: np.ndarray,
+    cf: np.ndarray,
+    choice: tuple,
+    rays: EdgeRays,
+    prior_term,
+    ambiguity: float,
+    n_edge_points: tuple[int, int],
+    tried: list,
+) -> PoseFitResult:
+    """The result of ``fitter`` (the :class:`~pose_fit.PoseFitter`) answering row ``b`` of its
+    polished and probed candidates ``xf`` (costs ``cf``); ``choice`` is (b, which rows the
+    priors allow, their misses or None, which rows are near enough to be rivals). ``rays``
+    are all edge rays, ``prior_term`` the polish's prior term (or None), ``ambiguity`` the
+    polish's cost gap and ``tried`` the end hypotheses the search started from."""
+    b, ok, misses, near = choice
+    cam, model = fitter.stereo.left, fitter.model
+    poses = params_to_pose(xf, cam, model)
+    rival_ratio, rival_offset = rival(b, poses, cf, ok & near)
+    tie = tie_ratio(b, poses, cf, ok, model)
+    T = poses[b]
+    r, _ = residuals(T[None], rays, model)
+    r = r[0]
+    inl = np.abs(r) < 1.5
+    rms = float(np.sqrt(np.mean(r[inl] ** 2))) if inl.any() else float("inf")
+    ang_std, pos_std = pose_uncertainty(
+        xf[b], rays, fitter.stereo, model, 1.0, fitter.final_loss, prior_term
+    )
+    return PoseFitResult(
+        T_cam_needle=T,
+        T_world_needle=cam.T_world_cam @ T,
+        params=xf[b],
+        cost=float(cf[b]),
+        rms_px=rms,
+        inlier_fraction=float(inl.mean()),
+        n_edge_points=n_edge_points,
+        ambiguity=ambiguity,
+        candidates=list(poses),
+        candidate_costs=tuple(float(v) for v in cf),
+        angle_std_deg=ang_std,
+        position_std_mm=pos_std,
+        prior_misses=() if misses is None else tuple(float(m) for m in misses[b]),
+        rival_ratio=rival_ratio,
+        rival_offset=rival_offset,
+        tie_ratio=tie,
+        ends_moved_px=ends_moved(np.asarray(end_pixels(cam, T, model)), tried),
+    )
