@@ -4,7 +4,7 @@ edge ray (residual, inliers, spread, rival, tie, how far its ends moved). Split 
 
 from __future__ import annotations
 
-from typing import Any
+from typing import TYPE_CHECKING
 
 import numpy as np
 
@@ -15,9 +15,12 @@ from suture_bt.perception.fit_starts import ends_moved
 from suture_bt.perception.needle_projection import end_pixels, params_to_pose
 from suture_bt.perception.rival_probe import rival, tie_ratio
 
+if TYPE_CHECKING:  # pose_fit imports this module
+    from suture_bt.perception.pose_fit import PoseFitter
+
 
 def answer_result(
-    fitter: Any,
+    fitter: PoseFitter,
     xf: np.ndarray,
     cf: np.ndarray,
     choice: tuple,

@@ -6,7 +6,7 @@ from __future__ import annotations
 
 from collections.abc import Sequence
 from dataclasses import dataclass, field
-from typing import Any
+from typing import TYPE_CHECKING
 
 import numpy as np
 
@@ -24,15 +24,18 @@ from suture_bt.perception.prior_term import HeldPlaceTerm
 from suture_bt.perception.refusal import NeedleNotFound
 from suture_bt.perception.tissue_cut import TissueCut
 
+if TYPE_CHECKING:  # pose_fit imports this module
+    from suture_bt.perception.pose_fit import PoseFitter
+
 
 @dataclass
 class StartSearch:
     """One fit's edge rays and extra terms, and the end hypotheses searched so far (``tried``,
     (base, tip) left pixels in order). ``fitter`` is the :class:`~pose_fit.PoseFitter` whose
-    settings, start grid (``_starts``) and tissue solid (``_with_solid``) it uses; not
-    imported here, for :mod:`pose_fit` imports this module."""
+    settings, start grid (``_starts``) and tissue solid (``_with_solid``) it uses (imported
+    for type checking only: :mod:`pose_fit` imports this module)."""
 
-    fitter: Any
+    fitter: PoseFitter
     rng: np.random.Generator
     el: np.ndarray
     er: np.ndarray
@@ -47,7 +50,7 @@ class StartSearch:
     @classmethod
     def begin(
         cls,
-        fitter: Any,
+        fitter: PoseFitter,
         left: MaskView,
         right: MaskView,
         end_priors: tuple[np.ndarray, np.ndarray] | None,
@@ -149,11 +152,9 @@ class StartSearch:
 
     def lowest(self, st: np.ndarray, n: int) -> np.ndarray:
         """The n lowest-cost feasible rows of ``st`` on the coarse edge subset."""
-        model = self.fitter.model
+        model, coarse = self.fitter.model, self.coarse
         T0 = params_to_pose(st, self.fitter.stereo.left, model)
-        r0 = edge_normal_equations(T0, None, FD_STEPS, self.coarse, model, 3.0, "cauchy", grid=12)[
-            0
-        ]
+        r0 = edge_normal_equations(T0, None, FD_STEPS, coarse, model, 3.0, "cauchy", grid=12)[0]
         r0 = np.concatenate([r0] + [t(T0) for t in self.terms], 1)
         c0 = robust_cost(r0, 3.0, self.coarse_w)
         order = np.argsort(c0)[:n]
