@@ -79,13 +79,14 @@ def task_scene(name: str, i: int, seed: int = 6173, masks: bool = False):
 
 def recorded_fit(name: str):
     """A pose fit the localiser once made, recorded in ``fixtures/needle_fits/<name>.npz``:
-    a fitter at 1920×1080 with the call's depth range (no tissue solid: the recorded cases
-    need none), the call's arguments (masks with their occluders, keypoints) and keyword
-    arguments (depth hint, alternatives, end priors, whether an end may be hidden), and the
-    needle's true pose (left camera)."""
+    a fitter at 1920×1080 with the call's depth range and, where the record holds the
+    phantom's pose, that phantom's tissue solid (the localiser's), the call's arguments (masks
+    with their occluders, keypoints) and keyword arguments (depth hint, alternatives, end
+    priors, whether an end may be hidden), and the needle's true pose (left camera)."""
     from pathlib import Path
 
-    from suture_bt.geometry import NeedleModel
+    from suture_bt.geometry import NeedleModel, PhantomModel
+    from suture_bt.geometry.tissue_surface import solid_pieces
     from suture_bt.perception.mask_view import MaskView
     from suture_bt.perception.pose_fit import PoseFitter
 
@@ -98,6 +99,8 @@ def recorded_fit(name: str):
 
     fitter = PoseFitter(stereo(1920, 1080), NeedleModel())
     fitter.depth_range = tuple(float(v) for v in d["depth_range"])
+    if "T_world_phantom" in d:
+        fitter.tissue_solid = solid_pieces(PhantomModel(d["T_world_phantom"]))
     kwargs = dict(
         depth_hint=float(d["depth_hint"]),
         alternatives=[tuple(a) for a in d["alternatives"]],

@@ -120,7 +120,7 @@ class StartSearch:
             at_end = seen_at_right_end(f.stereo, right_ends)
             entry = entry_starts(ends, cam, cut, f.model, at_end)
             if len(entry):
-                parts.append(self.lowest(pose_to_params(entry, cam, f.model), f.n_keep_alternative))
+                parts.append(self.lowest(pose_to_params(entry, cam, f.model), f.n_keep_entry))
         starts = np.concatenate(parts)
         if not len(starts):
             raise NeedleNotFound("no feasible pose hypothesis from the needle's end points")
