@@ -10,7 +10,7 @@ from suture_bt.geometry import NeedleModel
 from suture_bt.perception.colour_refine import ColourRule
 from suture_bt.perception.mask_view import MaskView
 from suture_bt.perception.needle_projection import project_cam, transform_points
-from suture_bt.perception.wire_growth import grown_along_wire, touches_grey
+from suture_bt.perception.wire_growth import grown_along_wire
 from suture_bt.transforms import invert
 
 FIXTURES = Path(__file__).parent / "fixtures" / "needle_fits"
@@ -52,8 +52,13 @@ def test_a_mask_with_no_grey_beside_it_comes_back_unchanged():
     img[:] = TISSUE
     img[48:53, 10:90] = GREY
     whole = MaskView(np.ones((5, 80), bool), (10, 48))
-    assert not touches_grey(img, whole, ColourRule())
     assert grown_along_wire(img, whole, 4.0, 100.0, ColourRule()) is whole
+    # An empty view (no needle pixel left in an eye) has nothing to grow from.
+    for empty in (
+        MaskView(np.zeros((5, 80), bool), (10, 48)),
+        MaskView(np.zeros((0, 0), bool), (0, 0)),
+    ):
+        assert grown_along_wire(img, empty, 4.0, 100.0, ColourRule()) is empty
 
 
 def test_growth_stops_at_its_reach_and_at_gaps_of_tissue():

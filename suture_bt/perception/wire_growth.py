@@ -26,21 +26,6 @@ HALF_RES_MIN_HALF_WIDTH_PX = 4.0
 GROWTH_STEP = 3.0
 
 
-def touches_grey(rgb: np.ndarray, view: MaskView, rule: ColourRule) -> bool:
-    """Whether a needle-coloured pixel outside the mask is 4-adjacent to it (something grey,
-    the wire or an occluder, continues where the mask stops)."""
-    h, w = view.mask.shape
-    if h == 0 or w == 0:
-        return False
-    H, W = rgb.shape[:2]
-    x0, y0 = view.origin
-    a, b, c, d = max(x0 - 1, 0), min(x0 + w + 1, W), max(y0 - 1, 0), min(y0 + h + 1, H)
-    m = np.zeros((d - c, b - a), bool)
-    m[y0 - c : y0 - c + h, x0 - a : x0 - a + w] = view.mask
-    ring = cv2.dilate(m.astype(np.uint8), np.ones((3, 3), np.uint8)).astype(bool) & ~m
-    return bool((ring & needle_coloured(rgb[c:d, a:b], rule)).any())
-
-
 def grown_along_wire(
     rgb: np.ndarray,
     view: MaskView,
@@ -52,13 +37,12 @@ def grown_along_wire(
     the wire can look) that are joined to it and within ``reach_px`` (the needle's chord) of
     all of its pixels.
 
-    Only runs when grey continues where the mask stops (:func:`touches_grey`); the view comes
-    back unchanged otherwise. A grown view carries no occluder or free-space fields (they are
-    marked after this step).
+    The view comes back unchanged where no thin grey joins it (an empty view too). A grown
+    view carries no occluder or free-space fields (they are marked after this step).
     """
-    rule = rule or ColourRule()
-    if not touches_grey(rgb, view, rule):
+    if not view.mask.any():
         return view
+    rule = rule or ColourRule()
     H, W = rgb.shape[:2]
     h, w = view.mask.shape
     x0, y0 = view.origin
