@@ -1,11 +1,11 @@
-"""The fit's result for its answer: the chosen candidate with the evidence measured on every
-edge ray (the true pose of an exact outline fits it to a fraction of a pixel)."""
+"""The fit's result for its answer: the chosen candidate with the evidence measured on its
+search's edge rays (the true pose of an exact outline fits it to a fraction of a pixel)."""
 
 import numpy as np
 from test_pose_fit import MODEL, _scene_1080p
 
-from suture_bt.perception.edge_residuals import edge_rays
 from suture_bt.perception.fit_answer import answer_result
+from suture_bt.perception.fit_search import StartSearch
 from suture_bt.perception.mask_view import edge_points
 from suture_bt.perception.needle_projection import end_pixels, pose_to_params
 from suture_bt.perception.pose_fit import PoseFitter
@@ -14,21 +14,21 @@ from suture_bt.perception.pose_fit import PoseFitter
 def test_the_true_pose_of_an_exact_outline_is_answered_with_tight_evidence():
     st, T, left, right, ends = _scene_1080p(3, 0.0)
     fitter = PoseFitter(st, MODEL)
-    el, er = edge_points(left), edge_points(right)
-    rays = edge_rays(st, el, er)
+    search = StartSearch.begin(fitter, left, right, None, ())
     cam = st.left
     far = T.copy()
     far[2, 3] += 0.02
     xf = pose_to_params(np.stack([far, T]), cam, MODEL)
     cf = np.array([5.0, 1.0])
     ok, near = np.array([True, True]), np.array([True, True])
-    tried = [tuple(end_pixels(cam, T, MODEL))]
-    res = answer_result(fitter, xf, cf, (1, ok, None, near), rays, None, 4.0, (7, 8), tried)
+    search.tried.append(tuple(end_pixels(cam, T, MODEL)))
+    res = answer_result(search, xf, cf, (1, ok, None, near), None, 4.0)
     np.testing.assert_allclose(res.T_cam_needle, T, atol=1e-9)
     np.testing.assert_allclose(res.T_world_needle, cam.T_world_cam @ res.T_cam_needle)
     np.testing.assert_array_equal(res.params, xf[1])
     assert res.cost == 1.0 and res.candidate_costs == (5.0, 1.0) and len(res.candidates) == 2
-    assert res.n_edge_points == (7, 8) and res.ambiguity == 4.0
+    n_edge = tuple(min(len(edge_points(v)), fitter.max_points_per_eye) for v in (left, right))
+    assert res.n_edge_points == n_edge and res.ambiguity == 4.0
     assert res.rms_px < 0.5 and res.inlier_fraction > 0.95
     assert res.prior_misses == ()
     assert res.ends_moved_px < 1e-6

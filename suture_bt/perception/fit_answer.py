@@ -8,33 +8,32 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 
-from suture_bt.perception.edge_residuals import EdgeRays, residuals
+from suture_bt.perception.edge_residuals import residuals
 from suture_bt.perception.fit_result import PoseFitResult
 from suture_bt.perception.fit_solver import pose_uncertainty
 from suture_bt.perception.fit_starts import ends_moved
 from suture_bt.perception.needle_projection import end_pixels, params_to_pose
+from suture_bt.perception.prior_term import PriorTerm
 from suture_bt.perception.rival_probe import rival, tie_ratio
 
-if TYPE_CHECKING:  # pose_fit imports this module
-    from suture_bt.perception.pose_fit import PoseFitter
+if TYPE_CHECKING:
+    from suture_bt.perception.fit_search import StartSearch
 
 
 def answer_result(
-    fitter: PoseFitter,
+    search: StartSearch,
     xf: np.ndarray,
     cf: np.ndarray,
     choice: tuple,
-    rays: EdgeRays,
-    prior_term,
+    prior_term: PriorTerm | None,
     ambiguity: float,
-    n_edge_points: tuple[int, int],
-    tried: list,
 ) -> PoseFitResult:
-    """The result of ``fitter`` (the :class:`~pose_fit.PoseFitter`) answering row ``b`` of its
+    """The result of the fit whose ``search`` (:class:`~.fit_search.StartSearch`: its fitter,
+    edge rays and the end hypotheses it started from) ends answering row ``b`` of its
     polished and probed candidates ``xf`` (costs ``cf``); ``choice`` is (b, which rows the
-    priors allow, their misses or None, which rows are near enough to be rivals). ``rays``
-    are all edge rays, ``prior_term`` the polish's prior term (or None), ``ambiguity`` the
-    polish's cost gap and ``tried`` the end hypotheses the search started from."""
+    priors allow, their misses or None, which rows are near enough to be rivals),
+    ``prior_term`` the polish's prior term (or None), ``ambiguity`` the polish's cost gap."""
+    fitter, rays = search.fitter, search.rays
     b, ok, misses, near = choice
     cam, model = fitter.stereo.left, fitter.model
     poses = params_to_pose(xf, cam, model)
@@ -55,7 +54,7 @@ def answer_result(
         cost=float(cf[b]),
         rms_px=rms,
         inlier_fraction=float(inl.mean()),
-        n_edge_points=n_edge_points,
+        n_edge_points=(len(search.el), len(search.er)),
         ambiguity=ambiguity,
         candidates=list(poses),
         candidate_costs=tuple(float(v) for v in cf),
@@ -65,5 +64,5 @@ def answer_result(
         rival_ratio=rival_ratio,
         rival_offset=rival_offset,
         tie_ratio=tie,
-        ends_moved_px=ends_moved(np.asarray(end_pixels(cam, T, model)), tried),
+        ends_moved_px=ends_moved(np.asarray(end_pixels(cam, T, model)), search.tried),
     )

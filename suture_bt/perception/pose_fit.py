@@ -265,9 +265,7 @@ class PoseFitter:
         xf, cf, b, ok, misses, near = probed(
             self, xf, cf, (b, ok, misses), FitRays(rays, coarse, mid), polish, priors, hidden_end
         )
-        choice = (b, ok, misses, near)
-        n_edge = (len(search.el), len(search.er))
-        return answer_result(self, xf, cf, choice, rays, prior_term, amb, n_edge, search.tried)
+        return answer_result(search, xf, cf, (b, ok, misses, near), prior_term, amb)
 
     def tissue_cut(self, priors: Sequence[NeedlePrior] = ()) -> TissueCut:
         """Where the tissue hides the arc for a fit with these priors: the known solid (if
