@@ -28,10 +28,10 @@ def answer_result(
     prior_term: PriorTerm | None,
     ambiguity: float,
 ) -> PoseFitResult:
-    """The result of the fit whose ``search`` (:class:`~.fit_search.StartSearch`: its fitter,
-    edge rays and the end hypotheses it started from) ends answering row ``b`` of its
-    polished and probed candidates ``xf`` (costs ``cf``); ``choice`` is (b, which rows the
-    priors allow, their misses or None, which rows are near enough to be rivals),
+    """The fit's result when it answers row ``b`` of its polished and probed candidates
+    ``xf`` (costs ``cf``). ``search`` is the fit's :class:`~.fit_search.StartSearch` (its
+    fitter, edge rays and the end hypotheses it started from); ``choice`` is (b, which rows
+    the priors allow, their misses or None, which rows are near enough to be rivals),
     ``prior_term`` the polish's prior term (or None), ``ambiguity`` the polish's cost gap."""
     fitter, rays = search.fitter, search.rays
     b, ok, misses, near = choice
