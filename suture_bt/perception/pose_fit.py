@@ -106,7 +106,7 @@ class PoseFitter:
     #: 2 depths, 12 turns about the chord). A short seen piece is almost straight, so the
     #: coarse cost hardly tells the turns apart: with 6 kept, held-out report 78041143
     #: `in_port` #29 without priors (session 41) lost the true turn and was answered 19 mm /
-    #: 148° off, with 9 or more it is answered 0.12 mm / 0.7° off. 12, as many as the main
+    #: 148° off, with 9, 12, 18 or 24 it is answered 0.12 mm / 0.7° off. 12, as many as the main
     #: hypothesis keeps: on 921 cached development calls the same verdicts but that one and a
     #: refusal now answered right; 8 other answers moved, none by more than 0.001° worse;
     #: no time measurable (two interleaved runs of each: 1 ms faster, within the noise).
