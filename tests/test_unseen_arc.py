@@ -13,6 +13,7 @@ from suture_bt.perception.unseen_arc import (
     SEEN,
     arc_exposure,
     below_port_planes,
+    hiders,
 )
 from suture_bt.transforms import invert, make_transform
 
@@ -68,6 +69,37 @@ def test_a_jaw_in_front_hides_the_unseen_part():
     st, T, imgs, views = _scene(occluder=True)
     e = arc_exposure(imgs, views, st, T, MODEL, HW)
     assert e.both == 0.0 and (e.classes[0] == HIDDEN).sum() > 10
+
+
+def test_specks_of_grey_in_the_tissue_hide_nothing():
+    """Dim tissue's sensor noise passes the colour test in specks (90509673 `held_presented`
+    #1, light gain 0.33): a slid pose over them is still exposed; the jaw still hides."""
+    st, T, imgs, views = _scene(background=PINK)
+    rng = np.random.default_rng(5)
+    speckled = []
+    for img in imgs:
+        img = img.copy()
+        ys, xs = rng.integers(0, img.shape[0], 3000), rng.integers(0, img.shape[1], 3000)
+        img[ys, xs] = GREY  # about 1 % of the pixels, single ones
+        speckled.append(img)
+    turned = T.copy()
+    turned[:3, :3] = _rz(0.7)
+    e = arc_exposure(tuple(speckled), views, st, turned, MODEL, HW)
+    assert e.both > 0.004 and min(e.end_exposed) > 0.004
+    st, T, imgs, views = _scene(occluder=True, background=PINK)
+    e = arc_exposure(imgs, views, st, T, MODEL, HW)
+    assert e.both == 0.0 and (e.classes[0] == HIDDEN).sum() > 10
+
+
+def test_hiders_drop_specks_but_keep_blobs_and_what_the_window_cuts():
+    grey = np.zeros((60, 60), bool)
+    grey[10, 10] = grey[30, 31] = True  # specks
+    grey[20:40, 40:50] = True  # a jaw's blade
+    grey[0:2, 20:23] = True  # a small piece cut by the window's top edge
+    out = hiders(grey, 2.0)  # a wire 4 px wide: blobs under 16 px² are specks
+    assert not out[10, 10] and not out[30, 31]
+    assert out[20:40, 40:50].all() and out[0:2, 20:23].all()
+    assert out.sum() == 200 + 6
 
 
 def test_tissue_hides_only_where_the_needle_may_be_inside_it():
