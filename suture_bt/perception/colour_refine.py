@@ -21,6 +21,7 @@ import cv2
 import numpy as np
 
 from suture_bt.perception.pose_fit import MaskView
+from suture_bt.perception.small_blobs import without_small_blobs
 
 
 @dataclass(frozen=True)
@@ -182,10 +183,7 @@ def remove_thick(mask: np.ndarray, max_half_width_px: float) -> np.ndarray:
     core = (dt > max_half_width_px).astype(np.uint8)
     # A few deep pixels inside the wire itself (where it crosses itself or is rendered a
     # pixel fat) are not a jaw: cores smaller than a quarter of the gate's square are ignored.
-    n, lab, stats, _ = cv2.connectedComponentsWithStats(core, connectivity=8)
-    specks = 1 + np.nonzero(stats[1:, cv2.CC_STAT_AREA] < MIN_CORE_AREA * max_half_width_px**2)[0]
-    if len(specks):
-        core[np.isin(lab, specks)] = 0
+    core = without_small_blobs(core, MIN_CORE_AREA * max_half_width_px**2).astype(np.uint8)
     if not core.any():
         return mask
     r = int(np.ceil(max_half_width_px)) + 2
@@ -233,12 +231,7 @@ def drop_thick(
     m = view.mask
     if max_half_width_px is not None:
         m = remove_thick(m, max_half_width_px)
-    m = m.astype(np.uint8)
-    n, lab, stats, _ = cv2.connectedComponentsWithStats(m, connectivity=8)
-    small = 1 + np.nonzero(stats[1:, cv2.CC_STAT_AREA] < rule.min_component_px)[0]
-    if len(small):
-        m[np.isin(lab, small)] = 0
-    return MaskView(m.astype(bool), view.origin)
+    return MaskView(without_small_blobs(m, rule.min_component_px), view.origin)
 
 
 def free_space_dt(

@@ -34,6 +34,7 @@ from suture_bt.geometry.tissue_surface import solid_pieces
 from suture_bt.interfaces import StereoCameraModel
 from suture_bt.perception.colour_refine import ColourRule, needle_coloured, tissue_coloured
 from suture_bt.perception.mask_view import MaskView
+from suture_bt.perception.small_blobs import without_small_blobs
 
 #: Centre-line samples (over the whole arc, about 0.35 mm apart).
 N_SAMPLES = 64
@@ -99,14 +100,7 @@ def _longest_run(flags: np.ndarray) -> int:
 def hiders(grey: np.ndarray, half_width: float) -> np.ndarray:
     """``grey`` (needle-coloured pixels of a window) without the blobs too small to hide a
     wire ``half_width`` px wide (MIN_HIDER_SQUARES) that do not reach the window's edge."""
-    n, lab, stats, _ = cv2.connectedComponentsWithStats(grey.astype(np.uint8), connectivity=8)
-    x, y = stats[:, cv2.CC_STAT_LEFT], stats[:, cv2.CC_STAT_TOP]
-    w, h = stats[:, cv2.CC_STAT_WIDTH], stats[:, cv2.CC_STAT_HEIGHT]
-    H, W = grey.shape
-    cut = (x == 0) | (y == 0) | (x + w == W) | (y + h == H)
-    keep = (stats[:, cv2.CC_STAT_AREA] >= MIN_HIDER_SQUARES * (2.0 * half_width) ** 2) | cut
-    keep[0] = False
-    return keep[lab]
+    return without_small_blobs(grey, MIN_HIDER_SQUARES * (2.0 * half_width) ** 2, True)
 
 
 def classify_points(
