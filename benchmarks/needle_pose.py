@@ -59,6 +59,7 @@ import needle_task_scenes
 import numpy as np
 from heldout_light import LIGHT_STREAM, relight
 from heldout_phantom import PHANTOM_STREAM, move_phantom, task_scene, tell_localizer
+from needle_random_scenes import draw_scene, visible_fraction
 from needle_summary import summary
 from needle_task_scenes import with_measured_errors
 from scipy.spatial.transform import Rotation
@@ -73,69 +74,11 @@ from suture_bt.perception.arc_geometry import arc_distance
 from suture_bt.perception.in_hand import JAW_POINT_IN_TIP
 from suture_bt.perception.needle_localizer import MAX_ANGLE_STD_DEG, NeedleLocalizer
 from suture_bt.perception.needle_prior import HeldPrior, PortPrior
-from suture_bt.perception.needle_projection import rasterize_needle
 from suture_bt.perception.pose_fit import NeedleNotFound
 from suture_bt.perception.unseen_arc import phantom_tissue
 from suture_bt.transforms import invert
 
 HELD_OUT_SEED = 1000
-#: Scene mix: SRC Task 1's needle resting on the tissue, a needle free in view, held in
-#: either jaw, or partly inserted in a port.
-SCEN_NAMES = ("resting", "free", "held_psm1", "held_psm2", "in_port")
-SCEN_WEIGHTS = (0.3, 0.3, 0.15, 0.15, 0.1)
-#: Draws per benchmark scene until one meets its condition (visible share of the needle).
-MAX_SCENE_ATTEMPTS = 200
-
-
-def _visible_fraction(sim: SimScene, s, mask: np.ndarray) -> float:
-    T = invert(sim.stereo.left.T_world_cam) @ s.T_world_needle
-    full = rasterize_needle(sim.stereo.left, T, sim.model)
-    return float((mask & full).sum() / max(full.sum(), 1))
-
-
-def _occluding_arm(sim: SimScene, s, rng, tries: int = 300):
-    """Joints for an arm whose tip lies between the camera and the needle (image-near)."""
-    cam = sim.stereo.left
-    T_cn = invert(cam.T_world_cam) @ s.T_world_needle
-    target = cam.project(s.T_world_needle[:3, 3][None])[0]
-    best = None
-    for _ in range(tries):
-        arm = ("psm1", "psm2")[int(rng.integers(2))]
-        if s.scenario == f"held_{arm}":
-            continue
-        q = rng.uniform([-1.2, -0.9, 0.08, -2.5, -1.3, -1.3], [1.2, 0.9, 0.22, 2.5, 1.3, 1.3])
-        tip = (sim.sampler.bases[arm] @ forward_kinematics(q))[:3, 3]
-        pc = cam.to_camera(tip[None])[0]
-        if not (0.03 < pc[2] < T_cn[2, 3] - 0.005):
-            continue
-        d = np.linalg.norm(cam.project(tip[None])[0] - target)
-        if best is None or d < best[0]:
-            best = (d, arm, q)
-    return best
-
-
-def _draw_scene(sim: SimScene, cond: str, rng, i: int):
-    """A scene meeting ``cond`` (visible needle share): (sample, left image, share, draws)."""
-    for draws in range(1, MAX_SCENE_ATTEMPTS + 1):
-        scen = str(rng.choice(list(SCEN_NAMES), p=list(SCEN_WEIGHTS)))
-        s = sim.sampler.sample(rng, scenario=scen, zr=(0.08, 0.2))
-        if cond == "unoccluded":
-            for a in ("psm1", "psm2"):
-                if s.scenario != f"held_{a}":
-                    s.q[a] = sim.sampler._arm_q(a, rng, False)
-        else:
-            occ = _occluding_arm(sim, s, rng)
-            if occ is None:
-                continue
-            s.q[occ[1]] = occ[2]
-        sim.apply(s)
-        left, mask = sim.render("left", s, rng)
-        frac = _visible_fraction(sim, s, mask)
-        if (cond == "unoccluded" and frac >= 0.97) or (cond == "occluded" and 0.4 <= frac <= 0.9):
-            return s, left, frac, draws
-    raise RuntimeError(f"no {cond} scene in {MAX_SCENE_ATTEMPTS} draws (scene {i})")
-
-
 #: Tolerances (m) of the benchmark's priors: held (exact joints) and in a port.
 HELD_PRIOR_TOL = 0.001
 PORT_PRIOR_TOL = 0.003
@@ -314,13 +257,13 @@ def run(cfg: BenchmarkRun) -> dict:
                         s, lit = relight(s, [seed, ci, i, LIGHT_STREAM])
                     sim.apply(s)
                     left, mask = sim.render("left", s, rng)
-                    frac, draws = _visible_fraction(sim, s, mask), 1
+                    frac, draws = visible_fraction(sim, s, mask), 1
                 else:
                     if cfg.phantom == "heldout":
                         pose = move_phantom(sim, [seed, ci, i, PHANTOM_STREAM])
                         tell_localizer(sim, loc)
                     rng = np.random.default_rng([seed, ci, i])
-                    s, left, frac, draws = _draw_scene(sim, cond, rng, i)
+                    s, left, frac, draws = draw_scene(sim, cond, rng, i)
                     if cfg.light == "heldout":
                         s, lit = relight(s, [seed, ci, i, LIGHT_STREAM])
                         left, _ = sim.render("left", s, rng)

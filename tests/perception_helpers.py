@@ -50,6 +50,7 @@ def task_scene(name: str, i: int, seed: int = 6173, masks: bool = False):
 
     sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "benchmarks"))
     import needle_pose
+    import needle_random_scenes
     import needle_task_scenes
 
     from suture_bt.datagen.needle_data import SimScene
@@ -64,7 +65,7 @@ def task_scene(name: str, i: int, seed: int = 6173, masks: bool = False):
             sim.apply(s)
             left, mask_left = sim.render("left", s, rng)
         else:  # the random sets (unoccluded, occluded): no task priors, no left mask
-            s, left, _, _ = needle_pose._draw_scene(sim, name, rng, i)
+            s, left, _, _ = needle_random_scenes.draw_scene(sim, name, rng, i)
             priors, mask_left = [], None
         right, mask_right = sim.render("right", s, rng)
         ph = sim.world.task.phantom
