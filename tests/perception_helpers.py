@@ -82,7 +82,7 @@ def recorded_fit(name: str):
     """A pose fit the localiser once made, recorded in ``fixtures/needle_fits/<name>.npz``:
     a fitter at 1920×1080 with the call's depth range and, where the record holds the
     phantom's pose, that phantom's tissue solid (the localiser's), the call's arguments (masks
-    with their occluders, keypoints) and keyword arguments (depth hint, alternatives, end
+    with their occluders, keypoints or None) and keyword arguments (depth hint, alternatives, end
     priors, whether an end may be hidden), and the needle's true pose (left camera)."""
     from pathlib import Path
 
@@ -110,7 +110,7 @@ def recorded_fit(name: str):
     )
     return (
         fitter,
-        (view("left"), view("right"), tuple(d["keypoints"])),
+        (view("left"), view("right"), tuple(d["keypoints"]) if "keypoints" in d else None),
         kwargs,
         d["T_cam_needle_true"],
     )

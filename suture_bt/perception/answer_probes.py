@@ -4,11 +4,11 @@ The fit's answer is the cheapest polished final, but the search's starts may all
 the needle's own basin. Four probes descend from the answer: its depth-mirror twin with the
 same end pixels, slides along its own circle (when an end is hidden), small turns, and the
 rival probe. The first three replace the answer when they find a cheaper pose (they are never
-its rivals); the twin's poses also stay among the candidates when costlier, so a twin of
-near-equal cost is a tie (TWIN_TIES); the rival probe's poses are kept as rivals, which the
-refusal gates weigh. Then the probed answer is taken back through the search's own wide stage
-(:func:`wide_redescent`); a cheaper result replaces it, and the probes run again from it when
-it moved.
+its rivals); the twin's and the slides' poses also stay among the candidates when costlier,
+so a twin or a slide of near-equal cost is a tie (TWIN_TIES, SLIDE_TIES); the rival probe's
+poses are kept as rivals, which the refusal gates weigh. Then the probed answer is taken back
+through the search's own wide stage (:func:`wide_redescent`); a cheaper result replaces it,
+and the probes run again from it when it moved.
 """
 
 from __future__ import annotations
@@ -64,6 +64,15 @@ REPROBE_MM, REPROBE_DEG = 0.2, 1.0
 #: With it the call is refused as a tie; on the other 645 cached development calls no answer
 #: changes by a bit and no other call is refused.
 TWIN_TIES = True
+#: Whether the slide probe's poses join the candidates even when costlier than the answer, as
+#: the twin's do (TWIN_TIES). Found on two held-out report answers, needles held 34 and 46 mm
+#: from the eyes, 86 deg from face-on, answered 11.2 and 12.3 deg slid along their own circle
+#: (38018832 ``held_start`` #38 without priors, 90509673 #25 with them): seen edge-on, a slide
+#: moves the wire mostly along the line of sight. The slide probe had found clearly different
+#: slid poses at 1.0001x and 1.029x the answer's cost (for #38, 2.7 deg from the needle), and
+#: dropped them as not cheaper. Kept, they tie the answer (the tie gate refuses it); on the
+#: other 1,067 cached development calls no verdict or answer moves.
+SLIDE_TIES = True
 
 
 def wide_redescent(fitter: PoseFitter, x_answer, rays: FitRays, polish: list):
@@ -168,6 +177,7 @@ def _probe_round(ctx: ProbeContext, finals: Finals) -> None:
     fitter, probes = ctx.fitter, ctx.probes
     rivals = probes[-1] if fitter.probe_rivals else None
     twin = probes[0] if fitter.probe_twin and TWIN_TIES else None
+    slides = [p for p in probes if p.starts is slide_starts] if SLIDE_TIES else []
     loss = fitter.final_loss
     start = finals.x[finals.b].copy()
     results = probe_together(probes, [start] * len(probes), ctx.rays, ctx.polish, loss)
@@ -186,7 +196,9 @@ def _probe_round(ctx: ProbeContext, finals: Finals) -> None:
             finals.near[finals.b] = True
             finals.add(xs, cs, near=True)
         else:
-            # A cheaper pose only (the answer then), but every twin (a tie if near-equal).
-            keep = np.isfinite(cs) if probe is twin else cs < finals.cost[finals.b]
+            # A cheaper pose only (the answer then), but every twin and slide (a tie if
+            # near-equal).
+            ties = probe is twin or probe in slides
+            keep = np.isfinite(cs) if ties else cs < finals.cost[finals.b]
             finals.add(xs[keep], cs[keep], near=False)
         finals.chosen_again(ctx)
