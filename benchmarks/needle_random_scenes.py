@@ -1,6 +1,7 @@
 """The needle benchmark's random scenes (``unoccluded``, ``occluded``): a needle resting on the
-tissue, free in view, held in a jaw or partly in a port, 80-200 mm from the cameras, with the
-share of its pixels the left eye sees (≥ 97 %, or 40-90 % behind an arm placed in the way).
+tissue, free in view, held in a jaw or partly in a port, 80-200 mm from the cameras where the
+scene allows it, with the share of its pixels the left eye sees (≥ 97 %, or 40-90 % behind an
+arm placed in the way).
 """
 
 from __future__ import annotations
@@ -21,6 +22,8 @@ MAX_SCENE_ATTEMPTS = 200
 
 
 def visible_fraction(sim: SimScene, s, mask: np.ndarray) -> float:
+    """Share of the needle's whole silhouette in the left eye that ``mask`` (what is seen)
+    holds."""
     T = invert(sim.stereo.left.T_world_cam) @ s.T_world_needle
     full = rasterize_needle(sim.stereo.left, T, sim.model)
     return float((mask & full).sum() / max(full.sum(), 1))

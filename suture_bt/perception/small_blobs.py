@@ -7,7 +7,9 @@ import cv2
 import numpy as np
 
 
-def without_small_blobs(mask: np.ndarray, min_area: float, keep_edge_cut: bool = False):
+def without_small_blobs(
+    mask: np.ndarray, min_area: float, keep_edge_cut: bool = False
+) -> np.ndarray:
     """``mask`` (bool or uint8) as bool without its 8-connected blobs of fewer than
     ``min_area`` pixels; with ``keep_edge_cut``, blobs that reach the array's edge stay
     whatever their size (the edge may have cut a larger one)."""
