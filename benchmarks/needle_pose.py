@@ -7,7 +7,8 @@ pixels visible) and ``occluded`` (an arm placed between the camera and the needl
 the needle's pixels visible in the left image). Errors: position = distance between estimated
 and true arc centres; angle = geodesic angle; task1 = SRC base + mid + tip distances. Failures
 to find the needle count as failures (success needs < 2 mm and < 5°); error means are over the
-scenes with an estimate, and ``not_found`` says how many had none.
+scenes with an estimate (``right_mean_*``: over the right answers only), and ``not_found`` says
+how many had none.
 
 ``--prior held`` gives the localiser a held-by prior in the held scenes (the pinch point from
 the holding arm's joints, which the benchmark scenes set exactly: the calibrated case, 1 mm

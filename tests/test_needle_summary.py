@@ -49,3 +49,19 @@ def test_summary_gives_the_p95_of_each_frames_fastest_call_and_counts_differing_
     s = needle_summary.summary(rows)
     assert s["best_ms_p95"] == 19.0 and s["wall_ms_p95"] == 119.0
     assert s["repeat_differs"] == 1
+
+
+def test_summary_gives_error_means_over_the_right_answers_beside_those_over_every_answer():
+    ms = {"network": 1.0, "refine": 1.0, "fit": 1.0, "ends": 1.0, "total": 4.0}
+    row = {"found": True, "ang_sym_deg": 0.5, "task1_mm": 0.3, "scenario": "free",
+           "visible": 0.85, "depth_mm": 100.0, "end_decided_by": "colour", "ms": ms}  # fmt: skip
+    right = row | {"pos_mm": 0.1, "ang_deg": 0.5}
+    wrong = row | {"pos_mm": 1.1, "ang_deg": 9.5}
+    s = needle_summary.summary([right, wrong])
+    assert s["wrong"] == 1
+    assert np.isclose(s["mean_pos_err_mm"], 0.6) and np.isclose(s["mean_ang_err_deg"], 5.0)
+    assert np.isclose(s["right_mean_pos_err_mm"], 0.1)
+    assert np.isclose(s["right_mean_ang_err_deg"], 0.5)
+    none_right = needle_summary.summary([wrong])
+    assert none_right["right_mean_pos_err_mm"] is None
+    assert none_right["right_mean_ang_err_deg"] is None
