@@ -40,6 +40,9 @@ def test_the_fitters_flags_choose_the_probes_in_order_with_the_rival_probe_last(
     fitter = PoseFitter(st, MODEL)
     assert _kinds(answer_probes(fitter, hidden_end=True)) == ["twin", "slide", "near", "rival"]
     assert _kinds(answer_probes(fitter, hidden_end=False)) == ["twin", "near", "rival"]
+    # The twin's and the slides' costlier poses stay candidates (ties); the others' do not.
+    kept = [p.keeps_costlier for p in answer_probes(fitter, hidden_end=True)]
+    assert kept == [True, True, False, False]
     fitter = PoseFitter(st, MODEL, probe_twin=False, probe_rivals=False)
     assert _kinds(answer_probes(fitter, hidden_end=False)) == ["near"]
 

@@ -95,9 +95,14 @@ def answer_probes(fitter: PoseFitter, hidden_end: bool) -> list[RivalProbe]:
     probes = []
     if fitter.probe_twin:
         twin = functools.partial(twin_starts, cam=stereo.left)
-        probes.append(RivalProbe(stereo, model, starts=twin, n_mid=1, n_polish=1))
+        probes.append(
+            RivalProbe(stereo, model, starts=twin, n_mid=1, n_polish=1, keeps_costlier=TWIN_TIES)
+        )
     if fitter.probe_slides and hidden_end:
-        probes.append(RivalProbe(stereo, model, starts=slide_starts, **SMALL_PROBE))
+        slides = RivalProbe(
+            stereo, model, starts=slide_starts, keeps_costlier=SLIDE_TIES, **SMALL_PROBE
+        )
+        probes.append(slides)
     if fitter.probe_near:
         near = RivalProbe(stereo, model, starts=near_starts, apart_from_answer=False, **SMALL_PROBE)
         probes.append(near)
@@ -176,8 +181,6 @@ def _probe_round(ctx: ProbeContext, finals: Finals) -> None:
     (the same results with one descent per stage instead of four)."""
     fitter, probes = ctx.fitter, ctx.probes
     rivals = probes[-1] if fitter.probe_rivals else None
-    twin = probes[0] if fitter.probe_twin and TWIN_TIES else None
-    slides = [p for p in probes if p.starts is slide_starts] if SLIDE_TIES else []
     loss = fitter.final_loss
     start = finals.x[finals.b].copy()
     results = probe_together(probes, [start] * len(probes), ctx.rays, ctx.polish, loss)
@@ -197,8 +200,7 @@ def _probe_round(ctx: ProbeContext, finals: Finals) -> None:
             finals.add(xs, cs, near=True)
         else:
             # A cheaper pose only (the answer then), but every twin and slide (a tie if
-            # near-equal).
-            ties = probe is twin or probe in slides
-            keep = np.isfinite(cs) if ties else cs < finals.cost[finals.b]
+            # near-equal: ``keeps_costlier``).
+            keep = np.isfinite(cs) if probe.keeps_costlier else cs < finals.cost[finals.b]
             finals.add(xs[keep], cs[keep], near=False)
         finals.chosen_again(ctx)

@@ -239,6 +239,10 @@ class RivalProbe:
     #: Whether only poses clearly different from the answer are carried on (a rival search);
     #: False carries the cheapest wherever they are (a search for a nearby cheaper basin).
     apart_from_answer: bool = True
+    #: Whether the fit keeps this probe's poses as candidates even when costlier than the
+    #: answer, so that a near-equal one ties it (the twin's and the slides':
+    #: :mod:`~.answer_probes`); otherwise only a cheaper pose is kept.
+    keeps_costlier: bool = False
 
     def __call__(
         self, x_answer: np.ndarray, rays: FitRays, terms: list, loss: str
