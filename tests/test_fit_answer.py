@@ -1,7 +1,9 @@
 """The fit's result for its answer: the chosen candidate with the evidence measured on its
-search's edge rays (the true pose of an exact outline fits it to a fraction of a pixel)."""
+search's edge rays (the true pose of an exact outline fits it to a fraction of a pixel); an
+answer seen obliquely has no rival among its own slides."""
 
 import numpy as np
+from perception_helpers import pose_errors, recorded_fit
 from test_pose_fit import MODEL, _scene_1080p
 
 from suture_bt.perception.fit_answer import answer_result
@@ -9,6 +11,7 @@ from suture_bt.perception.fit_search import StartSearch
 from suture_bt.perception.mask_view import edge_points
 from suture_bt.perception.needle_projection import end_pixels, pose_to_params
 from suture_bt.perception.pose_fit import PoseFitter
+from suture_bt.perception.rival_probe import MAX_RIVAL_RATIO, oblique_slides, pose_offset
 
 
 def test_the_true_pose_of_an_exact_outline_is_answered_with_tight_evidence():
@@ -33,3 +36,27 @@ def test_the_true_pose_of_an_exact_outline_is_answered_with_tight_evidence():
     assert res.prior_misses == ()
     assert res.ends_moved_px < 1e-6
     assert np.isfinite(res.angle_std_deg) and np.isfinite(res.position_std_mm)
+
+
+def test_an_answer_seen_obliquely_has_no_rival_among_its_slides(monkeypatch):
+    """Development call 38018832 ``held_presented`` #19 without priors (held-out phantom and
+    light), as the fit saw it: a needle held 62 mm from the eyes, 61 deg from face-on, its
+    band end in view. The answer is right; the rival probe reached slides of it 17-31 deg
+    along its circle at 1.08x its cost, which refused it as ambiguous before."""
+    fitter, args, kwargs, T = recorded_fit("oblique_slide")
+    fit = fitter.fit(*args, **kwargs)
+    errors = min(pose_errors(fit.T_cam_needle, P) for P in (T, MODEL.swapped(T)))
+    assert errors[0] < 0.2 and errors[1] < 1.0
+    poses = np.stack(fit.candidates)
+    b = int(np.argmin(fit.candidate_costs))
+    slides = oblique_slides(b, poses)
+    cheap = [
+        i for i in np.nonzero(slides)[0] if fit.candidate_costs[i] < MAX_RIVAL_RATIO * fit.cost
+    ]
+    assert any(pose_offset(poses[i], poses[b])[1] > 15.0 for i in cheap)
+    assert fit.rival_ratio > MAX_RIVAL_RATIO
+    monkeypatch.setattr("suture_bt.perception.rival_probe.OBLIQUE_MAX_DEG", 0.0)
+    counted = fitter.fit(*args, **kwargs)
+    np.testing.assert_array_equal(counted.T_cam_needle, fit.T_cam_needle)
+    mm, deg = counted.rival_offset
+    assert counted.rival_ratio < MAX_RIVAL_RATIO and mm < 0.1 and deg > 15.0

@@ -14,7 +14,7 @@ from suture_bt.perception.fit_solver import pose_uncertainty
 from suture_bt.perception.fit_starts import ends_moved
 from suture_bt.perception.needle_projection import end_pixels, params_to_pose
 from suture_bt.perception.prior_term import PriorTerm
-from suture_bt.perception.rival_probe import rival, tie_ratio
+from suture_bt.perception.rival_probe import oblique_slides, rival, tie_ratio
 
 if TYPE_CHECKING:
     from suture_bt.perception.fit_search import StartSearch
@@ -37,7 +37,7 @@ def answer_result(
     b, ok, misses, near = choice
     cam, model = fitter.stereo.left, fitter.model
     poses = params_to_pose(xf, cam, model)
-    rival_ratio, rival_offset = rival(b, poses, cf, ok & near)
+    rival_ratio, rival_offset = rival(b, poses, cf, ok & near & ~oblique_slides(b, poses))
     tie = tie_ratio(b, poses, cf, ok, model)
     T = poses[b]
     r, _ = residuals(T[None], rays, model)

@@ -19,7 +19,8 @@ z axis through the arc centre, :func:`slide_starts`): a fit can stop a few degre
 circle from the needle where its ends are seen only in part (found on session 14's report seed
 78212405: a Task 3 start answered 6.7° off, at 3.6× the cost of the needle's own pose). It
 runs when an end may be hidden (or priors are given), and only a cheaper slid pose is kept,
-replacing the answer. A slid pose is never a rival: where both ends are hidden (a needle
+replacing the answer. A slid pose is never a rival (nor is a slide another probe reaches, when
+the answer is seen obliquely: :func:`oblique_slides`): where both ends are hidden (a needle
 pulled through, its tip in the jaw and its base in the tissue) the outline cannot say how far
 along its circle the needle is, and counting slides as rivals refused 10 right development
 answers, 8 of them ``in_port`` views. On the development frames (seeds 1000 and 6173, 651
@@ -98,6 +99,16 @@ MAX_RIVAL_RATIO = 1.2
 #: whose tie was recorded (session 19's files call it ``twin_ratio``), one was below 1.03
 #: (1.011, report seed 25453685 `occluded` #18) and the next 1.057.
 MAX_TIE_RATIO = 1.03
+#: Two poses on one circle (arc centres at most this far apart, mm, and planes at most this
+#: far from parallel, deg): one is the other slid along its circle.
+SAME_CIRCLE_MM, SAME_CIRCLE_DEG = 0.5, 2.0
+#: An answer whose plane is at most this far from face-on (deg) has no slide rivals
+#: (:func:`oblique_slides`). On 1,149 cached development calls, 9 right answers seen 46-63 deg
+#: from face-on were refused for a slide at 1.07-1.20x their cost (five calls of 38018832
+#: `held_presented`, two of 99679326 `occluded`, one of 17239218 and one of 27209126); every
+#: answer slid wrongly was seen 84-87 deg from face-on (24391302 `held_start` #9 with priors,
+#: 5.8 deg slid, the needle's own pose at 1.24x; 38018832 #38 and 90509673 #25, ties).
+OBLIQUE_MAX_DEG = 75.0
 
 
 def probe_starts(T: np.ndarray, model: NeedleModel) -> np.ndarray:
@@ -186,6 +197,22 @@ def _pose_offset(Ta, Tb):
     for i in range(3):
         d += (Ta[i, 3] - Tb[i, 3]) ** 2
     return 1e3 * math.sqrt(d), math.degrees(math.acos(c))
+
+
+def oblique_slides(b: int, poses: np.ndarray) -> np.ndarray:
+    """Which ``poses`` (K, 4, 4, left camera) are slides of pose ``b`` along its own circle
+    while ``b`` is seen obliquely (OBLIQUE_MAX_DEG): such a slide moves the seen arc's ends
+    across the image, where the edge cost weighs them, so it is no rival of ``b``. Seen nearly
+    edge-on, a slide moves the wire mostly along the line of sight, and stays one."""
+    T = np.asarray(poses[b], dtype=float)
+    sight = T[:3, 3] / np.linalg.norm(T[:3, 3])
+    if math.degrees(math.acos(min(abs(float(T[:3, 2] @ sight)), 1.0))) > OBLIQUE_MAX_DEG:
+        return np.zeros(len(poses), bool)
+    centres = 1e3 * np.linalg.norm(poses[:, :3, 3] - T[:3, 3], axis=1)
+    normals = np.degrees(np.arccos(np.clip(np.abs(poses[:, :3, 2] @ T[:3, 2]), 0.0, 1.0)))
+    same = (centres <= SAME_CIRCLE_MM) & (normals <= SAME_CIRCLE_DEG)
+    same[b] = False
+    return same
 
 
 def distinct(Ta: np.ndarray, Tb: np.ndarray) -> bool:
