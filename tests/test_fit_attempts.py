@@ -13,6 +13,7 @@ from test_pose_fit import MODEL, _scene_1080p, _tip_hidden, _views
 from suture_bt.perception import pose_fit
 from suture_bt.perception.answer_gates import AnswerGates
 from suture_bt.perception.colour_refine import ColourRule
+from suture_bt.perception.exposure_gate import ExposureGate
 from suture_bt.perception.fit_attempts import FitAttempts, _same_pair
 from suture_bt.perception.needle_prior import HeldPrior
 from suture_bt.perception.needle_projection import project_cam, transform_points
@@ -55,12 +56,21 @@ def test_a_clean_outline_is_answered_and_each_gate_refuses_with_its_reason():
 
 def test_an_answer_with_a_close_rival_is_refused_with_its_reason(monkeypatch):
     """Half the needle hidden: a turned pose explains the seen piece as well (see
-    test_rival_probe), so the answer is refused, naming the rival's offset and cost."""
+    test_rival_probe), so the answer is refused, naming the rival's offset and cost. The
+    rival is a slide of the answer along its circle, seen 52 deg from face-on: it counts
+    where slides of an oblique answer are rivals (OBLIQUE_MAX_DEG 0). By default it does not,
+    and the answer, slid 55 deg on past the seen base end, runs 8.7 mm over the background,
+    which the exposure gate refuses."""
     st, T, left, right, ends = _scene_1080p(4, 0.0)
     occ, short, _ = _tip_hidden(st, T, left, right, ends)
     images = tuple(np.zeros((1080, 1920, 3), np.uint8) for _ in range(2))
     args = (images, tuple(occ), short, None, 2.0, None, np.stack([short, short]), np.zeros((2, 2)))
     loose = dict(max_angle_std_deg=float("inf"), refit_moved_px=float("inf"))
+    slid = _attempts(st, **loose)(*args)
+    assert pose_errors(slid.T_cam_needle, T)[1] > 50.0 and slid.rival_ratio == float("inf")
+    with pytest.raises(NeedleNotFound, match="hidden by nothing"):
+        ExposureGate(st, MODEL, ColourRule(), None)(images, tuple(occ), slid.T_cam_needle, ())
+    monkeypatch.setattr("suture_bt.perception.rival_probe.OBLIQUE_MAX_DEG", 0.0)
     with pytest.raises(NeedleNotFound, match="another pose .* explains the outline almost as well"):
         _attempts(st, **loose)(*args)
     # Nothing says the tip is hidden (black images, no grey occluder): the answer's ends moved
