@@ -105,7 +105,7 @@ def summary(rows: list[dict]) -> dict:
     t1 = np.array([r["task1_mm"] for r in est])
     ok = [_right(r) for r in rows]
     ok_sym = [_right(r, "ang_sym_deg") for r in rows]
-    right = [r for r in est if _right(r)]
+    right = [r for r, good in zip(rows, ok, strict=True) if good]
     t = {
         k: np.array([r["ms"][k] for r in est])
         for k in ("network", "refine", "fit", "ends", "total")
