@@ -20,6 +20,8 @@ def test_defaults_are_the_documented_limits():
     assert g.refit_moved_px == answer_gates.REFIT_MOVED_PX
     assert g.max_rival_ratio == rival_probe.MAX_RIVAL_RATIO
     assert g.max_tie_ratio == rival_probe.MAX_TIE_RATIO
+    assert g.max_tie_ratio_far == rival_probe.MAX_TIE_RATIO_FAR
+    assert g.far_tie_depth == rival_probe.FAR_TIE_DEPTH
     assert g.max_angle_std_deg == spread_limits.MAX_ANGLE_STD_DEG
     assert g.max_angle_std_deg_held == spread_limits.MAX_ANGLE_STD_DEG_HELD
     assert g.max_angle_std_deg_in_tissue == spread_limits.MAX_ANGLE_STD_DEG_IN_TISSUE
@@ -34,6 +36,21 @@ def test_the_angle_limit_follows_the_priors_and_the_gates_own_values():
     assert g.angle_std_limit(()) == pytest.approx(unaided)
     assert g.angle_std_limit((port,)) == 3.0
     assert g.angle_std_limit((pinned,)) == 5.0
+
+
+def test_a_far_answer_without_priors_is_held_to_the_far_tie_limit():
+    g = AnswerGates()
+    assert rival_probe.MAX_TIE_RATIO < rival_probe.MAX_TIE_RATIO_FAR
+    near = rival_probe.FAR_TIE_DEPTH - 0.005
+    assert g.tie_limit(near, ()) == rival_probe.MAX_TIE_RATIO
+    assert g.tie_limit(rival_probe.FAR_TIE_DEPTH, ()) == rival_probe.MAX_TIE_RATIO_FAR
+    assert g.tie_limit(0.2, ()) == rival_probe.MAX_TIE_RATIO_FAR
+    # A prior has chosen the candidates weighed: the near limit holds at any depth.
+    port = PortPrior("entry 1", np.zeros(3), 0.002)
+    assert g.tie_limit(0.2, (port,)) == rival_probe.MAX_TIE_RATIO
+    # The caller's own values, far and near.
+    loose = AnswerGates(max_tie_ratio=0.5, max_tie_ratio_far=0.7, far_tie_depth=0.1)
+    assert (loose.tie_limit(0.09, ()), loose.tie_limit(0.1, ())) == (0.5, 0.7)
 
 
 def test_gates_are_frozen_so_loosening_one_call_cannot_leak_into_the_next():

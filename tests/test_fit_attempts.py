@@ -6,7 +6,7 @@ from dataclasses import replace
 
 import numpy as np
 import pytest
-from perception_helpers import pose_errors, stereo
+from perception_helpers import pose_errors, recorded_fit, stereo
 from scipy.spatial.transform import Rotation
 from test_pose_fit import MODEL, _scene_1080p, _tip_hidden, _views
 
@@ -18,7 +18,12 @@ from suture_bt.perception.fit_attempts import FitAttempts, _same_pair
 from suture_bt.perception.needle_prior import HeldPrior
 from suture_bt.perception.needle_projection import project_cam, transform_points
 from suture_bt.perception.pose_fit import NeedleNotFound, PoseFitter
-from suture_bt.perception.rival_probe import MAX_RIVAL_RATIO, MAX_TIE_RATIO
+from suture_bt.perception.rival_probe import (
+    FAR_TIE_DEPTH,
+    MAX_RIVAL_RATIO,
+    MAX_TIE_RATIO,
+    MAX_TIE_RATIO_FAR,
+)
 
 
 def test_end_pairs_match_in_either_order_within_tolerance():
@@ -84,7 +89,9 @@ def test_an_answer_with_a_close_rival_is_refused_with_its_reason(monkeypatch):
     monkeypatch.setattr(pose_fit, "RESEED_MOVED_PX", float("inf"))
     with pytest.raises(NeedleNotFound, match="explain the outline equally well"):
         _attempts(st, max_rival_ratio=0.0, **loose)(*args)
-    fit = _attempts(st, max_rival_ratio=0.0, max_tie_ratio=0.0, **loose)(*args)
+    fit = _attempts(st, max_rival_ratio=0.0, max_tie_ratio=0.0, max_tie_ratio_far=0.0, **loose)(
+        *args
+    )
     assert fit.rival_ratio <= MAX_RIVAL_RATIO and fit.tie_ratio <= MAX_TIE_RATIO
 
 
@@ -174,3 +181,26 @@ def test_a_refit_that_finds_the_same_pose_again_keeps_the_first_fits_rival():
     kept = _attempts(st)._refit_from_own_ends(first, lambda main, alternatives: again)
     assert kept.cost == again.cost
     assert kept.rival_ratio == 1.1 and kept.rival_offset == (1.0, 20.0)
+
+
+def test_a_far_answer_tied_with_its_mirror_twin_is_refused():
+    """Session 44's one wrong SRC answer (28801072 ``occluded`` #14), as the fit saw it: a free
+    needle 154 mm away, a quarter of it hidden, answered as its mirror twin (12 mm / 165 deg
+    off) with the needle's own pose among the candidates at 1.098x the cost: over the near
+    tie limit, within the far one."""
+    fitter, args, kwargs, T = recorded_fit("far_mirror_twin")
+    fit = fitter.fit(*args, **kwargs)
+    assert pose_errors(fit.T_cam_needle, T)[0] > 10.0
+    assert fit.T_cam_needle[2, 3] > FAR_TIE_DEPTH
+    assert MAX_TIE_RATIO < fit.tie_ratio < MAX_TIE_RATIO_FAR
+    truth = [
+        c
+        for P, c in zip(fit.candidates, fit.candidate_costs, strict=True)
+        if pose_errors(P, T)[0] < 2.0
+    ]
+    assert truth and min(truth) / fit.cost == pytest.approx(fit.tie_ratio)
+    attempts = _attempts(fitter.stereo)
+    with pytest.raises(NeedleNotFound, match=r"limit 1\.10 at 145 mm"):
+        attempts._check(fit, ())
+    # Held to the near limit, the twin would have been answered.
+    _attempts(fitter.stereo, far_tie_depth=1.0)._check(fit, ())

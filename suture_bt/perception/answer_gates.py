@@ -12,7 +12,12 @@ from dataclasses import dataclass
 
 from suture_bt.perception.exposure_gate import MAX_EXPOSED
 from suture_bt.perception.needle_prior import NeedlePrior
-from suture_bt.perception.rival_probe import MAX_RIVAL_RATIO, MAX_TIE_RATIO
+from suture_bt.perception.rival_probe import (
+    FAR_TIE_DEPTH,
+    MAX_RIVAL_RATIO,
+    MAX_TIE_RATIO,
+    MAX_TIE_RATIO_FAR,
+)
 from suture_bt.perception.spread_limits import (
     MAX_ANGLE_STD_DEG,
     MAX_ANGLE_STD_DEG_HELD,
@@ -71,12 +76,22 @@ class AnswerGates:
     max_rival_ratio: float = MAX_RIVAL_RATIO
     #: A clearly different candidate within this ratio of the answer's cost is a tie: refused.
     max_tie_ratio: float = MAX_TIE_RATIO
+    #: The same for an answer at least ``far_tie_depth`` (m) from the camera, without priors.
+    max_tie_ratio_far: float = MAX_TIE_RATIO_FAR
+    far_tie_depth: float = FAR_TIE_DEPTH
     #: An answer whose ends moved farther (px) from every end hypothesis is refit from them.
     refit_moved_px: float = REFIT_MOVED_PX
     #: Arc (m) a fit may leave unseen with nothing hiding it (inf: no check).
     max_exposed: float = MAX_EXPOSED
     #: How far (deg) an answer may slide along its circle into the tissue (inf: no check).
     max_tissue_slide_deg: float = MAX_TISSUE_SLIDE_DEG
+
+    def tie_limit(self, depth: float, priors: Sequence[NeedlePrior]) -> float:
+        """The tie ratio refused for an answer whose arc centre is ``depth`` (m) along the
+        camera's view axis: ``max_tie_ratio_far`` from ``far_tie_depth`` on when no prior
+        is given (with priors, the candidates weighed are those the priors allow)."""
+        far = depth >= self.far_tie_depth and not priors
+        return self.max_tie_ratio_far if far else self.max_tie_ratio
 
     def angle_std_limit(self, priors: Sequence[NeedlePrior]) -> float:
         """The loosest predicted angle spread answered for these priors

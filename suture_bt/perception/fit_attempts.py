@@ -182,11 +182,13 @@ class FitAttempts:
                 f"well (cost {ratio:.2f}x the answer's, limit {limit:.2f}): the seen part does "
                 "not pin the pose"
             )
-        if fit.tie_ratio <= g.max_tie_ratio:
+        depth = float(fit.T_cam_needle[2, 3])
+        tie_limit = g.tie_limit(depth, priors)
+        if fit.tie_ratio <= tie_limit:
             raise NeedleNotFound(
                 f"two clearly different poses explain the outline equally well (cost "
-                f"{fit.tie_ratio:.4f}x the answer's, limit {g.max_tie_ratio:.2f}): the seen "
-                "part is the same arc in both and nothing seen tells them apart"
+                f"{fit.tie_ratio:.4f}x the answer's, limit {tie_limit:.2f} at "
+                f"{1e3 * depth:.0f} mm): nothing seen tells them apart"
             )
 
     def _refit_from_own_ends(self, fit: PoseFitResult, attempt) -> PoseFitResult:

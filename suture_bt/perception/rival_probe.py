@@ -99,6 +99,20 @@ MAX_RIVAL_RATIO = 1.2
 #: whose tie was recorded (session 19's files call it ``twin_ratio``), one was below 1.03
 #: (1.011, report seed 25453685 `occluded` #18) and the next 1.057.
 MAX_TIE_RATIO = 1.03
+#: From this far (m: the answer's arc centre along the camera's view axis) a clearly different
+#: candidate within MAX_TIE_RATIO_FAR of the answer's cost is a tie too. What tells a far arc
+#: from its tilt mirror, or from the same arc turned end for end, is perspective and the depth
+#: along the arc, and both fade with distance (as r/z and b·Δz/z²): a far near-tie is the image
+#: failing to decide. Over the 95 report files of sessions 20-44 (36,458 answers that record
+#: their tie; development data now), the answers 80 mm or more away with a tie in [1.03, 1.10)
+#: were 78 right and 6 wrong, every one in ``occluded``: mirror twins and turned poses 2-19 mm /
+#: 14-179 deg off, among them session 44's one wrong answer (28801072 #14, a tie of 1.098).
+#: The right ones were 0.9 % of the 8,516 answers that far, all in the random-pose sets: the
+#: task's own views are nearer. Nearer than 80 mm the same band held 56 right and 2 wrong.
+#: With priors it is not applied: those 6 wrong answers had none, none of the 510 answers
+#: that far with priors had such a tie, and the candidates weighed are those the priors allow.
+FAR_TIE_DEPTH = 0.08
+MAX_TIE_RATIO_FAR = 1.10
 #: Two poses on one circle (arc centres at most this far apart, mm, and planes at most this
 #: far from parallel, deg): one is the other slid along its circle.
 SAME_CIRCLE_MM, SAME_CIRCLE_DEG = 0.5, 2.0
