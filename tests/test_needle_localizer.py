@@ -289,10 +289,14 @@ def test_a_highlight_in_one_eye_does_not_set_the_needles_depth():
     85 mm away; a white highlight on the jaw joins the right eye's mask. It dragged the masks'
     disparity to 39 mm, which overruled the keypoints' 96 mm, widened the thickness gate to
     keep the highlight, and the arc bent into it: 1.4 mm / 7.7° off, spread 0.14°. The wire's
-    own thickness (3 px: a wire about 90 mm away) says which depth to believe."""
+    own thickness (3 px: a wire about 90 mm away) says which depth to believe. Since session
+    45 the answer is refused as a far tie (a pose clearly apart at 1.054x its cost, 85 mm
+    away: the far limit is 1.10); answered under the near limit, it is the needle's."""
     stereo_model, left, right, T, _, tissue = task_scene("occluded", 123, seed=11493571)
     loc = NeedleLocalizer(stereo_model, tissue=tissue)
-    est = loc.localize(left, right)
+    with pytest.raises(NeedleNotFound, match=r"1\.05\d\dx the answer's, limit 1\.10 at 8\d mm"):
+        loc.localize(left, right)
+    est = loc.localize(left, right, gates=replace(loc.gates, far_tie_depth=float("inf")))
     pos, ang = pose_errors(est.T_cam_needle, T)
     assert pos < 1.0 and ang < 2.5  # 0.28 mm / 1.3 deg
 
