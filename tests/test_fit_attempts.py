@@ -203,4 +203,4 @@ def test_a_far_answer_tied_with_its_mirror_twin_is_refused():
     with pytest.raises(NeedleNotFound, match=r"limit 1\.10 at 145 mm"):
         attempts._check(fit, ())
     # Held to the near limit, the twin would have been answered.
-    _attempts(fitter.stereo, far_tie_depth=1.0)._check(fit, ())
+    _attempts(fitter.stereo, far_tie_depth=float("inf"))._check(fit, ())

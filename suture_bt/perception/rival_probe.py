@@ -107,10 +107,11 @@ MAX_TIE_RATIO = 1.03
 #: their tie; development data now), the answers 80 mm or more away with a tie in [1.03, 1.10)
 #: were 78 right and 6 wrong, every one in ``occluded``: mirror twins and turned poses 2-19 mm /
 #: 14-179 deg off, among them session 44's one wrong answer (28801072 #14, a tie of 1.098).
-#: The right ones were 0.9 % of the 8,516 answers that far, all in the random-pose sets: the
-#: task's own views are nearer. Nearer than 80 mm the same band held 56 right and 2 wrong.
-#: With priors it is not applied: those 6 wrong answers had none, none of the 510 answers
-#: that far with priors had such a tie, and the candidates weighed are those the priors allow.
+#: The right ones were 0.9 % of the 8,516 answers that far, all but one (an ``in_port`` view
+#: without priors) in the random-pose sets: the task's own views are nearer. Nearer than 80 mm
+#: the same band held 56 right and 2 wrong. With priors it is not applied: those 6 wrong
+#: answers had none, none of the 510 answers that far with priors had such a tie, and the
+#: candidates weighed are those the priors allow.
 FAR_TIE_DEPTH = 0.08
 MAX_TIE_RATIO_FAR = 1.10
 #: Two poses on one circle (arc centres at most this far apart, mm, and planes at most this
