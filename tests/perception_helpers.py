@@ -41,6 +41,12 @@ def pose_errors(Ta: np.ndarray, Tb: np.ndarray) -> tuple[float, float]:
     return pos, ang
 
 
+def answer_index(fit) -> int:
+    """The row of a fit's candidates that is its answer (found by pose: the cheapest
+    candidate need not be the answer, as a prior may choose another)."""
+    return next(i for i, P in enumerate(fit.candidates) if np.array_equal(P, fit.T_cam_needle))
+
+
 def task_scene(name: str, i: int, seed: int = 6173, masks: bool = False):
     """Development scene ``i`` of the needle benchmark's set ``name`` (seed 6173, the tuning
     seed, by default) rendered in the simulator: (stereo model, left, right, true T_cam_needle, task

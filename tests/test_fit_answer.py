@@ -3,7 +3,7 @@ search's edge rays (the true pose of an exact outline fits it to a fraction of a
 answer seen obliquely has no rival among its own slides."""
 
 import numpy as np
-from perception_helpers import pose_errors, recorded_fit
+from perception_helpers import answer_index, pose_errors, recorded_fit
 from test_pose_fit import MODEL, _scene_1080p
 
 from suture_bt.perception.fit_answer import answer_result
@@ -48,7 +48,7 @@ def test_an_answer_seen_obliquely_has_no_rival_among_its_slides(monkeypatch):
     errors = min(pose_errors(fit.T_cam_needle, P) for P in (T, MODEL.swapped(T)))
     assert errors[0] < 0.2 and errors[1] < 1.0
     poses = np.stack(fit.candidates)
-    b = next(i for i, P in enumerate(poses) if np.array_equal(P, fit.T_cam_needle))
+    b = answer_index(fit)
     slides = oblique_slides(b, poses)
     cheap = [
         i for i in np.nonzero(slides)[0] if fit.candidate_costs[i] < MAX_RIVAL_RATIO * fit.cost
