@@ -16,6 +16,7 @@ from dataclasses import dataclass, replace
 from suture_bt.geometry import NeedleModel
 from suture_bt.interfaces import StereoCameraModel
 from suture_bt.perception.base_or_tip import occlusion_radius
+from suture_bt.perception.both_eyes import both_eyes
 from suture_bt.perception.colour_refine import (
     ColourRule,
     coarse_components,
@@ -24,6 +25,7 @@ from suture_bt.perception.colour_refine import (
     refine_mask,
 )
 from suture_bt.perception.mask_disparity import mask_disparity
+from suture_bt.perception.mask_view import MaskView
 from suture_bt.perception.needle_ends import with_band_pieces
 from suture_bt.perception.occlusion import with_occluder, without_occluder_rims
 from suture_bt.perception.refusal import NeedleNotFound
@@ -82,9 +84,9 @@ class NeedleMasks:
         # Pieces of one needle lie within its chord of each other, at the nearest distance.
         chord = self.model.chord
         max_gap = chord * self.stereo.left.fx / NEAR_UNMEASURED / scale
-        raw = []
-        for eye, img in enumerate(images):
-            name = ("left", "right")[eye]
+
+        def raw_view(eye: int) -> MaskView:
+            img, name = images[eye], ("left", "right")[eye]
             h = int(round(img.shape[0] / scale))
             coarse = coarse_components(
                 prob[eye][:h], self.coarse_threshold, max_gap=max_gap, anchors=anchors[eye]
@@ -93,7 +95,9 @@ class NeedleMasks:
                 raise NeedleNotFound(
                     f"the network sees no needle in the {name} image", unseen_eye=name
                 )
-            raw.append(refine_mask(img, coarse, scale, self.rule))
+            return refine_mask(img, coarse, scale, self.rule)
+
+        raw = both_eyes(raw_view)
         fx_left = self.stereo.left.fx
         fb = fx_left * self.stereo.baseline
         disp = mask_disparity(raw[0], raw[1], fb / MAX_DEPTH, fb / MIN_DEPTH)
@@ -116,10 +120,10 @@ class NeedleMasks:
         z_near = NEAR_UNMEASURED if near is None else near
         half_width = 1.35 * self.model.wire_radius * self.stereo.left.fx / z_near
         half_width = max(half_width, MIN_HALF_WIDTH_PX)
-        views = []
         cams = (self.stereo.left, self.stereo.right)
-        for eye, (img, view) in enumerate(zip(images, raw, strict=True)):
-            view = drop_thick(view, half_width, self.rule)
+
+        def gated_view(eye: int) -> MaskView:
+            img, view = images[eye], drop_thick(raw[eye], half_width, self.rule)
             if self.grow_wire:
                 reach = chord * cams[eye].fx / z_near
                 view = grown_along_wire(img, view, half_width, reach, self.rule)
@@ -142,5 +146,6 @@ class NeedleMasks:
             if self.use_free_space:
                 dt, org = free_space_dt(img, view)
                 view = replace(view, free_dt=dt, free_origin=org)
-            views.append(view)
-        return views, half_width, depth, near
+            return view
+
+        return list(both_eyes(gated_view)), half_width, depth, near
