@@ -207,6 +207,7 @@ def test_grey_where_the_wire_goes_into_the_tissue_does_not_say_tip():
         max_rival_ratio=0.0,
         max_tie_ratio=0.0,
         max_tie_ratio_far=0.0,
+        max_tie_ratio_short=0.0,
         max_angle_std_deg=1e3,
         max_position_std_mm=1e3,
     )

@@ -18,6 +18,7 @@ from suture_bt.perception.rival_probe import (
     MAX_TIE_RATIO,
     MAX_TIE_RATIO_FAR,
 )
+from suture_bt.perception.short_tie import MAX_TIE_RATIO_SHORT, SHORT_SEEN
 from suture_bt.perception.spread_limits import (
     MAX_ANGLE_STD_DEG,
     MAX_ANGLE_STD_DEG_HELD,
@@ -79,6 +80,10 @@ class AnswerGates:
     #: The same for an answer at least ``far_tie_depth`` (m) from the camera, without priors.
     max_tie_ratio_far: float = MAX_TIE_RATIO_FAR
     far_tie_depth: float = FAR_TIE_DEPTH
+    #: The same for an answer nearer than that which either eye sees over less than
+    #: ``short_seen`` (m of arc), without priors (:mod:`short_tie`).
+    max_tie_ratio_short: float = MAX_TIE_RATIO_SHORT
+    short_seen: float = SHORT_SEEN
     #: An answer whose ends moved farther (px) from every end hypothesis is refit from them.
     refit_moved_px: float = REFIT_MOVED_PX
     #: Arc (m) a fit may leave unseen with nothing hiding it (inf: no check).
@@ -92,6 +97,13 @@ class AnswerGates:
         is given (with priors, the candidates weighed are those the priors allow)."""
         far = depth >= self.far_tie_depth and not priors
         return self.max_tie_ratio_far if far else self.max_tie_ratio
+
+    def short_tie_limit(self, seen: float, depth: float, priors: Sequence[NeedlePrior]) -> float:
+        """The tie ratio refused for an answer the shorter-seeing eye sees over ``seen`` (m of
+        arc) at ``depth`` (m): ``max_tie_ratio_short`` for a short view nearer than
+        ``far_tie_depth`` without priors, else 0 (the fit's own tie gate has run)."""
+        short = seen < self.short_seen and depth < self.far_tie_depth and not priors
+        return self.max_tie_ratio_short if short else 0.0
 
     def angle_std_limit(self, priors: Sequence[NeedlePrior]) -> float:
         """The loosest predicted angle spread answered for these priors

@@ -11,8 +11,9 @@
    caller's priors and the tissue's share of the arc allow (:mod:`spread_limits`).
 4. The fitted arc's unseen part must be hidden by something (:mod:`exposure_gate`,
    :mod:`unseen_arc`: a jaw or shaft, the border, the tissue where the caller's tissue model
-   says it can hide it), and no wire both eyes see may lie deep inside the known tissue; an
-   end that meets the tissue may not leave the needle free to slide on into it
+   says it can hide it), and no wire both eyes see may lie deep inside the known tissue; a
+   near view that shows only a short piece answers only a clear winner (:mod:`short_tie`);
+   an end that meets the tissue may not leave the needle free to slide on into it
    (:mod:`tissue_slide`); else a refusal.
 5. The outline cannot tell base from tip: the colour at the fitted ends (the violet swage band
    at the base, :mod:`needle_ends`; :mod:`base_or_tip`) does, else continuity with the previous
@@ -68,6 +69,7 @@ from suture_bt.perception.pose_fit import (
     NeedleNotFound,
     PoseFitter,
 )
+from suture_bt.perception.short_tie import check_short_tie
 from suture_bt.perception.spread_limits import (  # noqa: F401 - the limits, re-exported
     HELD_PIN_TOLERANCE,
     MAX_ANGLE_STD_DEG,
@@ -248,6 +250,7 @@ class NeedleLocalizer:
         )
         gate = ExposureGate(self.stereo, self.model, rule, self.tissue, gates.max_exposed)
         exposure = gate((left, right), views, fit.T_cam_needle, priors)
+        check_short_tie(fit, exposure, gates, priors)
         slide = tissue_slide(gate, (left, right), views, fit.T_cam_needle, priors)
         check_tissue_slide(slide, gates.max_tissue_slide_deg)
         t3 = time.perf_counter()
