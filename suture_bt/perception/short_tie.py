@@ -29,7 +29,8 @@ if TYPE_CHECKING:  # answer_gates takes its defaults from here
 #: wrong: 15.9 mm / 105° (28162783 `handover` #4, 5.9 mm seen, tie 1.054), 11.8 mm / 72°
 #: (74885920 `handover` #22, 4.2 mm, 1.095: refused here, its answer 55 mm away), 18.6 mm /
 #: 142° (82806613 `in_port` #30, 3.8 mm, 1.203: not refused, its answer lies 88 mm away, where
-#: seven right short answers held ties of 1.12-1.20) and one at 1.371 (47151840 `in_port` #0).
+#: seven right short answers held ties of 1.12-1.20) and one at 1.371 (47151840 `in_port` #0,
+#: 5.6° off; at session 46's code its answer ties at 1.092 and is refused here).
 #: Seen longer, ties up to 1.25 held 765 right answers and one wrong (78041143 `in_port` #29,
 #: 6.3 mm, 1.147). Both limits lie where those files put them, with little room either way:
 #: set on them, to be judged on seeds drawn after.
