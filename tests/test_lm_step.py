@@ -1,11 +1,13 @@
 """The compiled LM trial gives the bits of the separate kernels it replaces: the extra terms'
 residuals, and whole LM runs with every term the fit uses, with and without the tissue's cut;
-a term without a compiled form takes the uncompiled path."""
+a term without a compiled form takes the uncompiled path; a trial's poses, run on numba's
+threads, each get the bits a trial of that pose alone gives."""
 
 import subprocess
 import sys
 from pathlib import Path
 
+import numba
 import numpy as np
 import pytest
 from test_pose_fit import _scene_1080p
@@ -15,7 +17,13 @@ from suture_bt.perception import fit_solver
 from suture_bt.perception.edge_residuals import edge_rays
 from suture_bt.perception.fit_solver import levenberg_marquardt
 from suture_bt.perception.fit_terms import EndPriorTerm
-from suture_bt.perception.lm_step import _extra_residuals, compiled_terms
+from suture_bt.perception.lm_step import (
+    SERIAL_MAX_POSES,
+    _extra_residuals,
+    compiled_terms,
+    lm_trial,
+    trial_arrays,
+)
 from suture_bt.perception.mask_view import edge_points
 from suture_bt.perception.needle_prior import HeldPrior, PortPrior
 from suture_bt.perception.needle_projection import (
@@ -120,3 +128,44 @@ def test_a_fresh_process_whose_first_parallel_kernel_is_the_cached_trial_runs_it
     out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True)
     assert out.returncode == 0, out.stderr[-2000:]
     assert out.stdout.strip().splitlines()[-1] == "(8,)"
+
+
+@pytest.mark.parametrize("cut", [False, True])
+def test_a_trial_gives_each_pose_the_bits_it_gets_alone_and_on_any_number_of_threads(cut):
+    """A trial's poses run on numba's threads (one pose: on the caller's); each pose's
+    results are those of a trial of that pose alone (the serial path), whatever the thread
+    count, with a step taken and with every term the fit uses."""
+    st, rays, x, terms = _problem(cut)
+    extras = terms
+    n_edge = len(rays)
+    extra_w = np.ascontiguousarray(np.concatenate([e.column_weights(n_edge) for e in extras]))
+    fixed = trial_arrays(rays, st, MODEL, compiled_terms(extras, MODEL))
+    lam = np.full(len(x), 1e-2)
+    steps = fit_solver.FD_STEPS
+    first = lm_trial(x, False, *fit_solver._no_step(len(x)), extra_w, lam, steps, 1.0, 0, True,
+                     fit_solver._NO_THETA, fit_solver._NO_CS, fixed)  # fmt: skip
+    _, _, _, E6, r, theta, cs, A, g = first
+    assert SERIAL_MAX_POSES < len(x)
+
+    def trial(rows):
+        return lm_trial(x[rows], True, A[rows], g[rows], r[rows], E6[rows], extra_w, lam[rows],
+                        steps, 1.0, 0, True, theta[rows], cs[:, rows], fixed)  # fmt: skip
+
+    together = trial(slice(None))
+    threads = numba.get_num_threads()
+    try:
+        numba.set_num_threads(1)
+        on_one_thread = trial(slice(None))
+    finally:
+        numba.set_num_threads(threads)
+    for k in range(len(x)):
+        alone = trial(slice(k, k + 1))
+        for i, (a, c) in enumerate(zip(together, alone, strict=True)):
+            if i == 6:  # cos and sin hold their rows second
+                a, c = a[:, k], c[:, 0]
+            else:
+                a, c = a[k], c[0]
+            assert np.array_equal(a, c, equal_nan=True)
+    for a, b in zip(together, on_one_thread, strict=True):
+        assert np.array_equal(a, b, equal_nan=True)
+    assert np.isfinite(together[4][:, :n_edge]).any()

@@ -78,6 +78,114 @@ def _irls(r, sigma, loss):
 
 
 @njit(cache=True, parallel=True, fastmath=FAST_MATH)
+def angle_grid(lo, hi, grid):
+    """The nearest-angle search's grid: ``grid`` angles lo..hi with their cosines and sines,
+    computed as the parallel kernel computed them (a serial loop's cosines differ in the
+    last bit, which moves the nearest angles' Newton steps)."""
+    gv = np.linspace(lo, hi, grid)
+    return gv, np.cos(gv), np.sin(gv)
+
+
+@njit(cache=True, fastmath=FAST_MATH)
+def edge_pose(
+    k, T, T6, steps, origins, dirs, dz, focal, rad, wire, lo, hi, gv, gc, gs, theta_start,
+    cs_start, sigma, loss, want_system, seeded, cut, spans, dspans, r, theta, cs, A, g,
+):  # fmt: skip
+    """:func:`edge_system` for pose k alone, written into row k of r, θ, cos and sin, A and
+    g (r NaN and A, g zero on entry); ``gv``, ``gc``, ``gs``: the grid's angles, cosines and
+    sines; ``seeded`` and ``cut``: whether ``theta_start`` and ``spans`` hold row k. The
+    compiled LM trial calls it pose by pose (:mod:`lm_step`), with the same bits."""
+    N = origins.shape[0]
+    M = np.empty((6, 3, 2))
+    b = np.empty((6, 3))
+    J = np.empty(6)
+    R = T[k, :3, :3]
+    p = T[k, :3, 3]
+    if not np.all(np.isfinite(T[k])):
+        for n in range(N):
+            theta[k, n], cs[0, k, n], cs[1, k, n] = lo, math.cos(lo), math.sin(lo)
+        return
+    if want_system:
+        # Per parameter: Rᵀ dR (first two columns) and Rᵀ dp.
+        for j in range(6):
+            for i in range(3):
+                for c in range(2):
+                    acc = 0.0
+                    for m in range(3):
+                        acc += R[m, i] * (T6[k, j, m, c] - T[k, m, c]) / steps[j]
+                    M[j, i, c] = acc
+                acc = 0.0
+                for m in range(3):
+                    acc += R[m, i] * (T6[k, j, m, 3] - T[k, m, 3]) / steps[j]
+                b[j, i] = acc
+    for n in range(N):
+        x0 = origins[n, 0] - p[0]
+        x1 = origins[n, 1] - p[1]
+        x2 = origins[n, 2] - p[2]
+        o0 = R[0, 0] * x0 + R[1, 0] * x1 + R[2, 0] * x2
+        o1 = R[0, 1] * x0 + R[1, 1] * x1 + R[2, 1] * x2
+        o2 = R[0, 2] * x0 + R[1, 2] * x1 + R[2, 2] * x2
+        d0 = R[0, 0] * dirs[n, 0] + R[1, 0] * dirs[n, 1] + R[2, 0] * dirs[n, 2]
+        d1 = R[0, 1] * dirs[n, 0] + R[1, 1] * dirs[n, 1] + R[2, 1] * dirs[n, 2]
+        d2 = R[0, 2] * dirs[n, 0] + R[1, 2] * dirs[n, 1] + R[2, 2] * dirs[n, 2]
+        if seeded:
+            th, c, s = _nearest_angle(
+                o0, o1, o2, d0, d1, d2, rad, lo, hi, gv, gc, gs,
+                theta_start[k, n], cs_start[0, k, n], cs_start[1, k, n],
+            )  # fmt: skip
+        else:
+            th, c, s = _nearest_angle(
+                o0, o1, o2, d0, d1, d2, rad, lo, hi, gv, gc, gs, -1e9, 1.0, 0.0
+            )  # fmt: skip
+        cut_j, cut_e = -1, -1
+        if cut:
+            th_seen, cut_j, cut_e = clamp_to_seen(th, spans[k], lo, hi)
+            if cut_j >= 0:
+                th, c, s = th_seen, math.cos(th_seen), math.sin(th_seen)
+        theta[k, n], cs[0, k, n], cs[1, k, n] = th, c, s
+        a0, a1 = rad * c - o0, rad * s - o1
+        qd = a0 * d0 + a1 * d1 - o2 * d2
+        f = a0 * a0 + a1 * a1 + o2 * o2 - qd * qd
+        depth = qd * dz[n]
+        if not depth > 1e-6:
+            continue
+        res = (math.sqrt(max(f, 0.0)) - wire) * focal[n] / depth
+        r[k, n] = res
+        if not want_system:
+            continue
+        e0, e1, e2 = a0 - qd * d0, a1 - qd * d1, -o2 - qd * d2
+        dist = math.sqrt(e0 * e0 + e1 * e1 + e2 * e2)
+        kk = focal[n] / (qd * dz[n])
+        inv = 1.0 / max(dist, 1e-12)
+        along = (dist - wire) / qd
+        g0 = kk * (e0 * inv - along * d0)
+        g1 = kk * (e1 * inv - along * d1)
+        g2 = kk * (e2 * inv - along * d2)
+        P0, P1 = rad * c, rad * s
+        w = _irls(res, sigma, loss)
+        if not math.isfinite(w):
+            continue
+        for j in range(6):
+            v = (
+                (M[j, 0, 0] * P0 + M[j, 0, 1] * P1 + b[j, 0]) * g0
+                + (M[j, 1, 0] * P0 + M[j, 1, 1] * P1 + b[j, 1]) * g1
+                + (M[j, 2, 0] * P0 + M[j, 2, 1] * P1 + b[j, 2]) * g2
+            )
+            if cut_j >= 0:  # the cut's end moves along the arc with the pose
+                v += dspans[k, j, cut_j, cut_e] * (g1 * P0 - g0 * P1)
+            J[j] = v if math.isfinite(v) else 0.0
+        for i in range(6):
+            wi = w * J[i]
+            g[k, i] += wi * res
+            for j in range(i, 6):
+                A[k, i, j] += wi * J[j]
+    if want_system:
+        for i in range(6):
+            for j in range(i):
+                A[k, i, j] = A[k, j, i]
+
+
+@njit(cache=True, parallel=True, fastmath=FAST_MATH)
 def edge_system(
     T, T6, steps, origins, dirs, dz, focal, rad, wire, lo, hi, grid, theta_start,
     cs_start, sigma, loss, want_system, spans, dspans,
@@ -100,96 +208,13 @@ def edge_system(
     g = np.zeros((K, 6))
     seeded = theta_start.shape[0] == K
     cut = spans.shape[0] == K
-    gv = np.linspace(lo, hi, grid)
-    gc, gs = np.cos(gv), np.sin(gv)
+    gv, gc, gs = angle_grid(lo, hi, grid)
     for k in prange(K):  # poses are independent: the same bits on any number of threads
-        M = np.empty((6, 3, 2))
-        b = np.empty((6, 3))
-        J = np.empty(6)
-        R = T[k, :3, :3]
-        p = T[k, :3, 3]
-        if not np.all(np.isfinite(T[k])):
-            for n in range(N):
-                theta[k, n], cs[0, k, n], cs[1, k, n] = lo, math.cos(lo), math.sin(lo)
-            continue
-        if want_system:
-            # Per parameter: Rᵀ dR (first two columns) and Rᵀ dp.
-            for j in range(6):
-                for i in range(3):
-                    for c in range(2):
-                        acc = 0.0
-                        for m in range(3):
-                            acc += R[m, i] * (T6[k, j, m, c] - T[k, m, c]) / steps[j]
-                        M[j, i, c] = acc
-                    acc = 0.0
-                    for m in range(3):
-                        acc += R[m, i] * (T6[k, j, m, 3] - T[k, m, 3]) / steps[j]
-                    b[j, i] = acc
-        for n in range(N):
-            x0 = origins[n, 0] - p[0]
-            x1 = origins[n, 1] - p[1]
-            x2 = origins[n, 2] - p[2]
-            o0 = R[0, 0] * x0 + R[1, 0] * x1 + R[2, 0] * x2
-            o1 = R[0, 1] * x0 + R[1, 1] * x1 + R[2, 1] * x2
-            o2 = R[0, 2] * x0 + R[1, 2] * x1 + R[2, 2] * x2
-            d0 = R[0, 0] * dirs[n, 0] + R[1, 0] * dirs[n, 1] + R[2, 0] * dirs[n, 2]
-            d1 = R[0, 1] * dirs[n, 0] + R[1, 1] * dirs[n, 1] + R[2, 1] * dirs[n, 2]
-            d2 = R[0, 2] * dirs[n, 0] + R[1, 2] * dirs[n, 1] + R[2, 2] * dirs[n, 2]
-            if seeded:
-                th, c, s = _nearest_angle(
-                    o0, o1, o2, d0, d1, d2, rad, lo, hi, gv, gc, gs,
-                    theta_start[k, n], cs_start[0, k, n], cs_start[1, k, n],
-                )  # fmt: skip
-            else:
-                th, c, s = _nearest_angle(
-                    o0, o1, o2, d0, d1, d2, rad, lo, hi, gv, gc, gs, -1e9, 1.0, 0.0
-                )  # fmt: skip
-            cut_j, cut_e = -1, -1
-            if cut:
-                th_seen, cut_j, cut_e = clamp_to_seen(th, spans[k], lo, hi)
-                if cut_j >= 0:
-                    th, c, s = th_seen, math.cos(th_seen), math.sin(th_seen)
-            theta[k, n], cs[0, k, n], cs[1, k, n] = th, c, s
-            a0, a1 = rad * c - o0, rad * s - o1
-            qd = a0 * d0 + a1 * d1 - o2 * d2
-            f = a0 * a0 + a1 * a1 + o2 * o2 - qd * qd
-            depth = qd * dz[n]
-            if not depth > 1e-6:
-                continue
-            res = (math.sqrt(max(f, 0.0)) - wire) * focal[n] / depth
-            r[k, n] = res
-            if not want_system:
-                continue
-            e0, e1, e2 = a0 - qd * d0, a1 - qd * d1, -o2 - qd * d2
-            dist = math.sqrt(e0 * e0 + e1 * e1 + e2 * e2)
-            kk = focal[n] / (qd * dz[n])
-            inv = 1.0 / max(dist, 1e-12)
-            along = (dist - wire) / qd
-            g0 = kk * (e0 * inv - along * d0)
-            g1 = kk * (e1 * inv - along * d1)
-            g2 = kk * (e2 * inv - along * d2)
-            P0, P1 = rad * c, rad * s
-            w = _irls(res, sigma, loss)
-            if not math.isfinite(w):
-                continue
-            for j in range(6):
-                v = (
-                    (M[j, 0, 0] * P0 + M[j, 0, 1] * P1 + b[j, 0]) * g0
-                    + (M[j, 1, 0] * P0 + M[j, 1, 1] * P1 + b[j, 1]) * g1
-                    + (M[j, 2, 0] * P0 + M[j, 2, 1] * P1 + b[j, 2]) * g2
-                )
-                if cut_j >= 0:  # the cut's end moves along the arc with the pose
-                    v += dspans[k, j, cut_j, cut_e] * (g1 * P0 - g0 * P1)
-                J[j] = v if math.isfinite(v) else 0.0
-            for i in range(6):
-                wi = w * J[i]
-                g[k, i] += wi * res
-                for j in range(i, 6):
-                    A[k, i, j] += wi * J[j]
-        if want_system:
-            for i in range(6):
-                for j in range(i):
-                    A[k, i, j] = A[k, j, i]
+        edge_pose(
+            k, T, T6, steps, origins, dirs, dz, focal, rad, wire, lo, hi, gv, gc, gs,
+            theta_start, cs_start, sigma, loss, want_system, seeded, cut, spans, dspans,
+            r, theta, cs, A, g,
+        )  # fmt: skip
     return r, theta, cs, A, g
 
 

@@ -20,17 +20,17 @@ import math
 
 import numba
 import numpy as np
-from numba import njit
+from numba import njit, prange
 
 from suture_bt.geometry import NeedleModel
 from suture_bt.interfaces import StereoCameraModel
 from suture_bt.perception.arc_geometry import _arc_offsets, _ends, _place_offsets
-from suture_bt.perception.edge_kernel import edge_system
+from suture_bt.perception.edge_kernel import angle_grid, edge_pose
 from suture_bt.perception.edge_residuals import N_THETA_GRID, EdgeRays
 from suture_bt.perception.fit_terms import EndPriorTerm, _nearer_end_distances
 from suture_bt.perception.needle_projection import _needle_frame_basis, _poses_from_params
 from suture_bt.perception.prior_term import PRIOR_PX, HeldPlaceTerm, PriorTerm
-from suture_bt.perception.tissue_cut import hidden_spans, span_derivatives
+from suture_bt.perception.tissue_cut import grid_circle, span_derivatives, spans_of_poses
 
 #: Column blocks of the extra residuals, in the order the terms give them.
 _KEYPOINTS, _POINTS, _PLACES = 0, 1, 2
@@ -218,7 +218,13 @@ def trial_arrays(rays: EdgeRays, stereo: StereoCameraModel, model: NeedleModel, 
     else:
         groups, depths, _, _, _, shift, grid = cut._args
         tissue = (True, cut.points, cut.normals, groups, depths, shift, grid)
-    return camera, edge, shape, tissue, terms
+    grids = angle_grid(shape[2], shape[3], N_THETA_GRID) + grid_circle(tissue[6])
+    return camera, edge, shape, tissue, terms, grids
+
+
+#: Trials of at most this many poses run their poses on the calling thread: starting the
+#: thread pool's work costs about 10 µs, more than one pose's share of a trial.
+SERIAL_MAX_POSES = 1
 
 
 @njit(cache=True)
@@ -229,64 +235,139 @@ def lm_trial(x, take_step, A_edge, g_edge, r, E6, extra_w, lam, steps, sigma, lo
     poses T (K, 4, 4) and, when ``stepped``, their copies stepped by ``steps`` (K, 6, 4, 4)
     with the extra terms' residuals there; then the residuals (edge, then extra), nearest arc
     angles seeded by ``theta`` and ``cs`` (empty: grid search) and the edge normal equations
-    at T. Returns (x, T, T6, E6, r, θ, cos and sin, A, g); T6 and E6 empty unless stepped."""
-    camera, edge, shape, tissue, terms = fixed
+    at T. Returns (x, T, T6, E6, r, θ, cos and sin, A, g); T6 and E6 empty unless stepped.
+    Each pose's work is independent of the others' (:func:`_trial_row`), so its poses run
+    on numba's threads with the same bits on any number of them."""
+    K, N, M = x.shape[0], fixed[1][0].shape[0], fixed[4][10]
+    n = steps.shape[0] + 1
+    out = (
+        np.empty((K, 6)),  # x
+        np.empty((K, 4, 4)),  # T
+        np.zeros((K, n - 1, 4, 4)),  # T6
+        np.empty((K, M)),  # the extra residuals at T
+        np.empty((K, n - 1, M)) if stepped else np.zeros((0, n - 1, M)),  # E6
+        np.full((K, 2, 2), np.nan),  # the tissue's spans
+        np.full((K, 2, 2), -1, np.int64),  # their planes
+        np.zeros((K, n - 1, 2, 2)),  # their derivatives
+        np.full((K, N), np.nan),  # edge residuals
+        np.empty((K, N)),  # nearest arc angles
+        np.empty((2, K, N)),  # their cos and sin
+        np.zeros((K, 6, 6)),  # A
+        np.zeros((K, 6)),  # g
+    )
+    args = (x, take_step, A_edge, g_edge, r, E6, extra_w, lam, steps, sigma, loss, stepped,
+            theta, cs, fixed)  # fmt: skip
+    if K <= SERIAL_MAX_POSES:
+        _rows_serial(K, args, out)
+    else:
+        _rows_parallel(K, args, out)
+    xn, T, T6, E, E6n, _, _, _, r_edge, th, csn, An, gn = out
+    rn = np.empty((K, N + M))
+    rn[:, :N] = r_edge
+    rn[:, N:] = E
+    return xn, T, T6, E6n, rn, th, csn, An, gn
+
+
+@njit(cache=True, parallel=True)
+def _rows_parallel(K, args, out):
+    """:func:`_trial_row` over the poses on numba's threads. The parallel loop takes arrays
+    and numbers only, not tuples of them: the tuples are taken apart here and put together
+    again inside it."""
+    x, take_step, A_edge, g_edge, r, E6, extra_w, lam, steps, sigma, loss, stepped = args[:12]
+    theta, cs, fixed = args[12:]
+    camera, edge, shape, tissue, terms, grids = fixed
     fx, fy, cx, cy, Bn, chord, h = camera
     origins, dirs, dz, focal = edge
     rad, wire, lo, hi, grid = shape
     has_cut, P, N, groups, depths, shift, cut_grid = tissue
-    n_extra = terms[10]
-    K = x.shape[0]
-    if take_step:
-        A, g = A_edge, g_edge
-        if n_extra:
-            n_edge = r.shape[1] - n_extra
-            A, g = _with_extra_terms(A_edge, g_edge, r[:, n_edge:], E6, extra_w, steps, sigma, loss)
-        xn = x + damped_steps(A, g, lam)
-    else:
-        xn = x.copy()
-    n = steps.shape[0] + 1
-    flat = np.empty((K * n, 6))
+    blocks, eye_T, eye_k, kps, kp_off, ends, pts, tols, places, arc_ends, n_cols = terms
+    gv, gc, gs, cut_gc, cut_gs = grids
+    xn, T, T6, E, E6n, spans, planes, dspans, r_edge, th, csn, An, gn = out
+    for k in prange(K):  # poses are independent: the same bits on any number of threads
+        _trial_row(
+            k,
+            (x, take_step, A_edge, g_edge, r, E6, extra_w, lam, steps, sigma, loss, stepped,
+             theta, cs,
+             ((fx, fy, cx, cy, Bn, chord, h), (origins, dirs, dz, focal),
+              (rad, wire, lo, hi, grid), (has_cut, P, N, groups, depths, shift, cut_grid),
+              (blocks, eye_T, eye_k, kps, kp_off, ends, pts, tols, places, arc_ends, n_cols),
+              (gv, gc, gs, cut_gc, cut_gs))),
+            (xn, T, T6, E, E6n, spans, planes, dspans, r_edge, th, csn, An, gn),
+        )  # fmt: skip
+
+
+@njit(cache=True)
+def _rows_serial(K, args, out):
     for k in range(K):
-        for i in range(6):
-            flat[k * n, i] = xn[k, i] + 0.0
-            for j in range(1, n):
-                flat[k * n + j, i] = xn[k, i] + (steps[i] if i == j - 1 else 0.0)
-    Pn = _poses_from_params(flat, fx, fy, cx, cy, Bn, chord, h)
-    T = np.ascontiguousarray(Pn[::n])
+        _trial_row(k, args, out)
+
+
+@njit(cache=True)
+def _trial_row(k, args, out):
+    """Pose k of :func:`lm_trial` (its arguments ``args`` and grids; ``out`` its arrays, of
+    which this writes row k): the step, the pose and its stepped copies, the extra terms'
+    residuals, the tissue's spans with their derivatives, and the edge normal equations."""
+    x, take_step, A_edge, g_edge, r, E6, extra_w, lam, steps, sigma, loss, stepped = args[:12]
+    theta, cs, fixed = args[12:]
+    camera, edge, shape, tissue, terms, grids = fixed
+    fx, fy, cx, cy, Bn, chord, h = camera
+    origins, dirs, dz, focal = edge
+    rad, wire, lo, hi, grid = shape
+    has_cut, P, N, groups, depths, shift, cut_grid = tissue
+    gv, gc, gs, cut_gc, cut_gs = grids
+    xn, T, T6, E, E6n, spans, planes, dspans, r_edge, th, csn, An, gn = out
     M = terms[10]
-    if stepped:
-        T6 = np.empty((K, n - 1, 4, 4))
-        for k in range(K):
-            T6[k] = Pn[k * n + 1 : (k + 1) * n]
-        E_all = _extra_residuals(Pn, terms, rad, lo, hi) if M else np.zeros((K * n, 0))
-        E = np.ascontiguousarray(E_all[::n])
-        E6n = np.empty((K, n - 1, M))
-        for k in range(K):
-            E6n[k] = E_all[k * n + 1 : (k + 1) * n]
+    n = steps.shape[0] + 1
+    if take_step:
+        A, g = A_edge[k : k + 1], g_edge[k : k + 1]
+        if M:
+            n_edge = r.shape[1] - M
+            rx = r[k : k + 1, n_edge:]
+            A, g = _with_extra_terms(A, g, rx, E6[k : k + 1], extra_w, steps, sigma, loss)
+        step = damped_steps(A, g, lam[k : k + 1])
+        for i in range(6):
+            xn[k, i] = x[k, i] + step[0, i]
     else:
-        T6 = np.zeros((K, n - 1, 4, 4))
-        E = _extra_residuals(T, terms, rad, lo, hi) if M else np.zeros((K, 0))
-        E6n = np.zeros((0, n - 1, M))
-    spans = np.zeros((0, 2, 2))
-    dspans = np.zeros((0, n - 1, 2, 2))
+        for i in range(6):
+            xn[k, i] = x[k, i]
+    flat = np.empty((n, 6))
+    for i in range(6):
+        flat[0, i] = xn[k, i] + 0.0
+        for j in range(1, n):
+            flat[j, i] = xn[k, i] + (steps[i] if i == j - 1 else 0.0)
+    Pn = _poses_from_params(flat, fx, fy, cx, cy, Bn, chord, h)
+    T[k] = Pn[0]
+    if stepped:
+        T6[k] = Pn[1:]
+        if M:
+            E_all = _extra_residuals(Pn, terms, rad, lo, hi)
+            E[k] = E_all[0]
+            E6n[k] = E_all[1:]
+    elif M:
+        E[k] = _extra_residuals(Pn[:1], terms, rad, lo, hi)[0]
+    cut = False
     if has_cut:
-        s0, planes = hidden_spans(T, P, N, groups, depths, rad, lo, hi, shift, cut_grid)
-        if np.isfinite(s0).any():
-            spans = s0
-            if stepped:
-                dT = np.empty((K, n - 1, 4, 4))
-                for k in range(K):
-                    for j in range(n - 1):
-                        dT[k, j] = (T6[k, j] - T[k]) / steps[j]
-                dspans = span_derivatives(s0, planes, T, dT, N, rad, shift)
-            else:
-                dspans = np.zeros((K, n - 1, 2, 2))
-    r_edge, th, csn, An, gn = edge_system(
-        T, T6, steps, origins, dirs, dz, focal, rad, wire, lo, hi, grid, theta, cs, sigma,
-        loss, stepped, spans, dspans,
+        spans_of_poses(k, k + 1, T, P, N, groups, depths, rad, lo, hi, shift, cut_grid, cut_gc,
+                       cut_gs, spans, planes)  # fmt: skip
+        cut = np.isfinite(spans[k]).any()
+        if cut and stepped:
+            dT = _pose_differences(T6[k], T[k], steps)
+            d = span_derivatives(spans[k : k + 1], planes[k : k + 1], T[k : k + 1], dT, N, rad,
+                                 shift)  # fmt: skip
+            dspans[k] = d[0]
+    seeded = theta.shape[0] == x.shape[0]
+    edge_pose(
+        k, T, T6, steps, origins, dirs, dz, focal, rad, wire, lo, hi, gv, gc, gs, theta, cs,
+        sigma, loss, stepped, seeded, cut, spans, dspans, r_edge, th, csn, An, gn,
     )  # fmt: skip
-    rn = np.empty((K, r_edge.shape[1] + M))
-    rn[:, : r_edge.shape[1]] = r_edge
-    rn[:, r_edge.shape[1] :] = E
-    return xn, T, T6, E6n, rn, th, csn, An, gn
+
+
+@njit(cache=True)
+def _pose_differences(T6, T, steps):
+    """The forward differences (1, 6, 4, 4) of one pose T from its stepped copies T6, in
+    the arithmetic :meth:`~.tissue_cut.TissueCut.spans_and_derivatives` uses (compiled
+    without the edge kernel's licences, which would turn the division into a product)."""
+    dT = np.empty((1, T6.shape[0], 4, 4))
+    for j in range(T6.shape[0]):
+        dT[0, j] = (T6[j] - T) / steps[j]
+    return dT

@@ -171,6 +171,77 @@ def _boundary(A, B, C, G, act, D, u, v):
     return arg, plane
 
 
+@njit(cache=True, inline="always")
+def spans_of_pose(k, T, P, N, G, D, rad, lo, hi, shift, grid, gc, gs, out, planes):
+    """:func:`hidden_spans` for pose k alone, written into row k of ``out`` (NaN on entry)
+    and ``planes`` (-1 on entry); ``gc``, ``gs``: the grid's cosines and sines. The compiled
+    LM trial calls it pose by pose (:mod:`lm_step`), with the same bits."""
+    Q, S, NG = P.shape[0], grid.shape[0], G.shape[0] - 1
+    A, B, C = np.empty(Q), np.empty(Q), np.empty(Q)
+    act = np.empty(NG, np.bool_)
+    for q in range(Q):
+        a = b = c = 0.0
+        for m in range(3):
+            a += N[q, m] * T[k, m, 0]
+            b += N[q, m] * T[k, m, 1]
+            c += N[q, m] * (T[k, m, 3] - P[q, m])
+        A[q], B[q], C[q] = rad * a, rad * b, c
+    any_act = False
+    for g in range(NG):
+        act[g] = True
+        for q in range(G[g], G[g + 1]):
+            if C[q] - math.hypot(A[q], B[q]) >= 0.0:
+                act[g] = False
+                break
+        any_act = any_act or act[g]
+    if not any_act:
+        return
+    n, prev, start, start_plane, deep = 0, False, lo, -1, False
+    for i in range(S):
+        h, deep_here = _sample(A, B, C, G, act, D, gc[i], gs[i])
+        hid = h < 0.0
+        if hid and not prev:
+            start, start_plane = lo, -1
+            if i > 0:
+                start, start_plane = _boundary(A, B, C, G, act, D, grid[i - 1], grid[i])
+            deep = False
+        if hid:
+            deep = deep or deep_here
+        if prev and not hid and n < 2 and deep:
+            out[k, n, 0], planes[k, n, 0] = start, start_plane
+            out[k, n, 1], planes[k, n, 1] = _boundary(A, B, C, G, act, D, grid[i - 1], grid[i])
+            n += 1
+        prev = hid
+    if prev and n < 2 and deep:
+        out[k, n, 0], out[k, n, 1] = start, hi
+        planes[k, n, 0] = start_plane
+        n += 1
+    for j in range(n):  # the cut's rounded end reaches the plane
+        if out[k, j, 0] > lo:
+            out[k, j, 0] = max(out[k, j, 0] - shift, lo)
+        if out[k, j, 1] < hi:
+            out[k, j, 1] = min(out[k, j, 1] + shift, hi)
+        for e in range(2):  # an end clamped to the arc's end no longer moves
+            if out[k, j, e] <= lo or out[k, j, e] >= hi:
+                planes[k, j, e] = -1
+
+
+@njit(cache=True)
+def spans_of_poses(k0, k1, T, P, N, G, D, rad, lo, hi, shift, grid, gc, gs, out, planes):
+    """:func:`spans_of_pose` for poses k0..k1-1 on the calling thread (a loop, as
+    :func:`hidden_spans` runs it: inlined alone elsewhere the compiled code differs in the
+    last bit)."""
+    for k in range(k0, k1):
+        spans_of_pose(k, T, P, N, G, D, rad, lo, hi, shift, grid, gc, gs, out, planes)
+
+
+@njit(cache=True, parallel=True)
+def grid_circle(grid):
+    """Cosines and sines of the span search's grid angles, computed as the parallel kernel
+    computes them (a serial loop's may differ in the last bit)."""
+    return np.cos(grid), np.sin(grid)
+
+
 @njit(cache=True, parallel=True)
 def hidden_spans(T, P, N, G, D, rad, lo, hi, shift, grid):
     """Spans (K, 2, 2) of arc angle inside the tissue (planes: points P, normals N; Q each;
@@ -179,58 +250,12 @@ def hidden_spans(T, P, N, G, D, rad, lo, hi, shift, grid):
     meeting the seen arc set back by ``shift`` (rad) into it. NaN rows: no span. A piece
     with a plane the pose's whole circle lies outside of is skipped (most poses: all).
     Also the plane each end lies on (K, 2, 2; -1: an end of the arc, which does not move)."""
-    K, Q, S, NG = T.shape[0], P.shape[0], grid.shape[0], G.shape[0] - 1
+    K = T.shape[0]
     out = np.full((K, 2, 2), np.nan)
     planes = np.full((K, 2, 2), -1, np.int64)
-    gc, gs = np.cos(grid), np.sin(grid)
+    gc, gs = grid_circle(grid)
     for k in prange(K):  # poses are independent: the same bits on any number of threads
-        A, B, C = np.empty(Q), np.empty(Q), np.empty(Q)
-        act = np.empty(NG, np.bool_)
-        for q in range(Q):
-            a = b = c = 0.0
-            for m in range(3):
-                a += N[q, m] * T[k, m, 0]
-                b += N[q, m] * T[k, m, 1]
-                c += N[q, m] * (T[k, m, 3] - P[q, m])
-            A[q], B[q], C[q] = rad * a, rad * b, c
-        any_act = False
-        for g in range(NG):
-            act[g] = True
-            for q in range(G[g], G[g + 1]):
-                if C[q] - math.hypot(A[q], B[q]) >= 0.0:
-                    act[g] = False
-                    break
-            any_act = any_act or act[g]
-        if not any_act:
-            continue
-        n, prev, start, start_plane, deep = 0, False, lo, -1, False
-        for i in range(S):
-            h, deep_here = _sample(A, B, C, G, act, D, gc[i], gs[i])
-            hid = h < 0.0
-            if hid and not prev:
-                start, start_plane = lo, -1
-                if i > 0:
-                    start, start_plane = _boundary(A, B, C, G, act, D, grid[i - 1], grid[i])
-                deep = False
-            if hid:
-                deep = deep or deep_here
-            if prev and not hid and n < 2 and deep:
-                out[k, n, 0], planes[k, n, 0] = start, start_plane
-                out[k, n, 1], planes[k, n, 1] = _boundary(A, B, C, G, act, D, grid[i - 1], grid[i])
-                n += 1
-            prev = hid
-        if prev and n < 2 and deep:
-            out[k, n, 0], out[k, n, 1] = start, hi
-            planes[k, n, 0] = start_plane
-            n += 1
-        for j in range(n):  # the cut's rounded end reaches the plane
-            if out[k, j, 0] > lo:
-                out[k, j, 0] = max(out[k, j, 0] - shift, lo)
-            if out[k, j, 1] < hi:
-                out[k, j, 1] = min(out[k, j, 1] + shift, hi)
-            for e in range(2):  # an end clamped to the arc's end no longer moves
-                if out[k, j, e] <= lo or out[k, j, e] >= hi:
-                    planes[k, j, e] = -1
+        spans_of_pose(k, T, P, N, G, D, rad, lo, hi, shift, grid, gc, gs, out, planes)
     return out, planes
 
 
