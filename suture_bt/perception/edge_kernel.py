@@ -80,8 +80,9 @@ def _irls(r, sigma, loss):
 @njit(cache=True, parallel=True, fastmath=FAST_MATH)
 def angle_grid(lo, hi, grid):
     """The nearest-angle search's grid: ``grid`` angles lo..hi with their cosines and sines,
-    computed as the parallel kernel computed them (a serial loop's cosines differ in the
-    last bit, which moves the nearest angles' Newton steps)."""
+    compiled as :func:`edge_system` computed them, in a parallel function with its licences
+    (compiled without them, the same grid came out with other last bits, which moves the
+    nearest angles' Newton steps)."""
     gv = np.linspace(lo, hi, grid)
     return gv, np.cos(gv), np.sin(gv)
 

@@ -298,6 +298,7 @@ def _rows_parallel(K, args, out):
 
 @njit(cache=True)
 def _rows_serial(K, args, out):
+    """:func:`_trial_row` over the poses on the calling thread."""
     for k in range(K):
         _trial_row(k, args, out)
 

@@ -237,8 +237,8 @@ def spans_of_poses(k0, k1, T, P, N, G, D, rad, lo, hi, shift, grid, gc, gs, out,
 
 @njit(cache=True, parallel=True)
 def grid_circle(grid):
-    """Cosines and sines of the span search's grid angles, computed as the parallel kernel
-    computes them (a serial loop's may differ in the last bit)."""
+    """Cosines and sines of the span search's grid angles, computed once for the compiled
+    LM trial, in a parallel function as :func:`hidden_spans` computes them."""
     return np.cos(grid), np.sin(grid)
 
 
