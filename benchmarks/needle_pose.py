@@ -139,6 +139,7 @@ def _localize_row(loc, left, right, T_true, priors, repeat: int = 1) -> dict:
         "ang_sym_deg": min(ang, ang_sw),
         "task1_mm": t1,
         "rms_px": est.rms_px,
+        "pixel_scale": est.pixel_scale,
         "inlier_fraction": est.inlier_fraction,
         "end_decided_by": est.end_decided_by,
         "angle_std_deg": est.angle_std_deg,
@@ -187,7 +188,8 @@ def _keypoint_end_px(loc, est) -> list[float]:
     out = []
     for k in range(2):
         if est.keypoint_scores[0, k] >= STRONG_KEYPOINT_SCORE:
-            out.append(float(np.min(np.linalg.norm(ends - est.keypoints_left[k], axis=1))))
+            kp = (est.keypoints_left[k] + 0.5) * est.pixel_scale - 0.5  # full-resolution px
+            out.append(float(np.min(np.linalg.norm(ends - kp, axis=1))))
     return out
 
 

@@ -330,6 +330,7 @@ def test_an_answer_in_a_narrow_basin_is_descended_again_from_the_searchs_wide_st
     loc.fitter.probe_wide = False
     pos, ang = pose_errors(loc.localize(left, right, priors=priors).T_cam_needle, T)
     assert pos < 0.5 and ang < 1.0  # the whole wire seen: 0.01 mm / 0.04 deg
+    loc.halve_near = False  # the record's resolution (near_view)
     loc.grow_wire = False  # the record's mask
     loc.fitter.probe_wide = True
     pos, ang = pose_errors(loc.localize(left, right, priors=priors).T_cam_needle, T)

@@ -248,6 +248,7 @@ def test_the_near_probe_takes_a_stopped_fit_into_the_needles_basin():
     loc.fitter.probe_near = False
     whole = loc.localize(left, right)
     assert pose_errors(whole.T_cam_needle, T_true)[1] < 0.5
+    loc.halve_near = False  # the record's resolution (near_view)
     loc.grow_wire = False  # the record's mask
     # Since session 19 the stopped fit is refused as exposed: that gate is off for it.
     stopped = loc.localize(left, right, gates=AnswerGates(max_exposed=float("inf")))

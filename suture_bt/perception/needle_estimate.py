@@ -34,6 +34,9 @@ class NeedleEstimate:
     priors: tuple = ()
     #: Where the model arc lies unseen and unhidden, per eye (:mod:`unseen_arc`).
     exposure: ArcExposure | None = field(default=None, repr=False)
+    #: Full-resolution px per px of ``masks``, ``keypoints_left`` and the fit's pixel figures
+    #: (``rms_px``): 2 when a near needle was measured on the halved images (:mod:`near_view`).
+    pixel_scale: float = 1.0
 
     @property
     def angle_std_deg(self) -> float:

@@ -3,7 +3,9 @@
 1. Both images, area-downsampled to the network width, go through the CNN in one batch:
    coarse needle mask + base/tip heatmaps (sub-pixel keypoints).
 2. Each eye's coarse mask gates a full-resolution colour test (:mod:`needle_masks`,
-   :mod:`colour_refine`).
+   :mod:`colour_refine`). A needle the keypoints put nearer than 45 mm is measured from here
+   on on the images halved, where it looks as a needle at the working distance does
+   (:mod:`near_view`), unless the halved masks say it is not near.
 3. The stereo pose fit (:mod:`fit_attempts`, :mod:`pose_fit`) starts from the left keypoints,
    with a depth hint from their stereo disparity, and optionally a warm start from the
    previous estimate; an answer with a clearly different pose of near-equal cost nearby
@@ -23,9 +25,11 @@ Only images and the calibrated camera model are used (no ground truth).
 
 from __future__ import annotations
 
+import copy
 import os
 import time
 from collections.abc import Callable, Sequence
+from dataclasses import dataclass, replace
 
 import numpy as np
 
@@ -37,6 +41,7 @@ from suture_bt.perception.base_or_tip import BaseTipChooser
 from suture_bt.perception.colour_refine import ColourRule, frame_exposure
 from suture_bt.perception.exposure_gate import ExposureGate
 from suture_bt.perception.fit_attempts import FitAttempts
+from suture_bt.perception.near_view import confirms_near, halved, halved_stereo, wants_half
 from suture_bt.perception.needle_estimate import NeedleEstimate
 from suture_bt.perception.needle_masks import (  # noqa: F401 - the working range, re-exported
     MAX_DEPTH,
@@ -61,6 +66,7 @@ from suture_bt.perception.network import (
 from suture_bt.perception.network_reading import (
     MAX_CHORD_MARGIN,
     MIN_KEYPOINT_SCORE,
+    NetworkOutput,
     plausible_scores,
     read_network,
     trusted_ends_and_depth,
@@ -86,6 +92,23 @@ from suture_bt.perception.tissue_slide import check_tissue_slide, tissue_slide
 WINDOW_THRESHOLD = 0.1
 #: The fit searches no nearer than this share of the nearest stereo depth (keypoints', masks').
 NEAR_SLACK = 0.7
+
+
+@dataclass(frozen=True)
+class _Call:
+    """What one ``localize`` call brings to its measurement: the frame's colour rule, the
+    warm start, the priors, the gates and when it began and its network finished."""
+
+    rule: ColourRule
+    previous: np.ndarray | None
+    priors: tuple
+    gates: AnswerGates
+    t0: float
+    t1: float
+
+
+class _NotNear(Exception):
+    """The halved images' masks do not confirm a near needle: measure at full resolution."""
 
 
 class NeedleLocalizer:
@@ -139,6 +162,11 @@ class NeedleLocalizer:
         #: Whether each eye's mask grows along wire the network's coarse mask stopped short
         #: of (:mod:`~suture_bt.perception.wire_growth`).
         self.grow_wire = True
+        #: Whether a needle the keypoints put near is measured on the images halved
+        #: (:mod:`~suture_bt.perception.near_view`).
+        self.halve_near = True
+        #: Full-resolution px per px of this localiser's images (2 for its halved copy).
+        self.pixel_scale = 1.0
 
     @property
     def tissue(self) -> Callable[[np.ndarray], np.ndarray] | None:
@@ -211,28 +239,73 @@ class NeedleLocalizer:
         rule = self.rule.at_exposure(frame_exposure(left))
         self.last_network = (prob, scale)
         t1 = time.perf_counter()
+        reading = NetworkOutput(prob, kp, raw_score, scale)
+        call = _Call(rule, previous, tuple(priors), gates, t0, t1)
+        if self.halve_near:
+            score = self.plausible(kp, raw_score, prob, scale)
+            _, depth = trusted_ends_and_depth(kp, score, self.stereo)
+            if wants_half(depth, left.shape):
+                try:
+                    return self._halved()._measure(
+                        (halved(left), halved(right)), reading.halved(), call, confirm_near=True
+                    )
+                except _NotNear:
+                    pass  # the masks put the needle farther: measured at full resolution
+                except NeedleNotFound as exc:
+                    if not call.priors:
+                        exc.reason = f"{exc.reason} (measured on the halved images: near)"
+                        exc.args = (exc.reason,)
+                        raise
+                    # With the task's priors full resolution decides (near_view).
+        return self._measure((left, right), reading, call)
+
+    def _halved(self) -> NeedleLocalizer:
+        """This localiser on the halved images (:mod:`near_view`): its cameras at half width
+        and height, its fitter's current settings."""
+        half = copy.copy(self)
+        half.stereo = halved_stereo(self.stereo)
+        half.fitter = replace(self.fitter, stereo=half.stereo)
+        half.pixel_scale = 2.0 * self.pixel_scale
+        return half
+
+    def _measure(
+        self, images, reading: NetworkOutput, call: _Call, confirm_near: bool = False
+    ) -> NeedleEstimate:
+        """Everything after the network (masks, fit, gates, base or tip) on ``images`` at this
+        localiser's resolution. ``confirm_near``: raise :class:`_NotNear` unless the masks
+        put the needle near (:func:`~.near_view.confirms_near`), or when they fail."""
+        left, right = images
+        prob, kp, raw_score, scale = reading.prob, reading.keypoints, reading.scores, reading.scale
+        rule, previous, priors, gates = call.rule, call.previous, call.priors, call.gates
         score = self.plausible(kp, raw_score, prob, scale)
         ends, depth = trusted_ends_and_depth(kp, score, self.stereo)
         # The needle's coarse blob is the one at the trusted end keypoints (coarse px).
         anchors = [(kp[e][score[e] >= MIN_KEYPOINT_SCORE] + 0.5) / scale - 0.5 for e in (0, 1)]
         try:
-            views, half_width, depth, near = self._masks(
-                (left, right), rule, prob, scale, depth, anchors
-            )
+            try:
+                views, half_width, depth, near = self._masks(
+                    (left, right), rule, prob, scale, depth, anchors
+                )
+            except NeedleNotFound:
+                if depth is None:
+                    raise
+                # A wrong disparity depth makes the wire look thicker than it can be (a needle
+                # seen edge-on folds onto itself): drop the hint and gate at the nearest
+                # working distance.
+                views, half_width, depth, near = self._masks(
+                    (left, right), rule, prob, scale, None, anchors
+                )
         except NeedleNotFound:
-            if depth is None:
-                raise
-            # A wrong disparity depth makes the wire look thicker than it can be (a needle seen
-            # edge-on folds onto itself): drop the hint and gate at the nearest working distance.
-            views, half_width, depth, near = self._masks(
-                (left, right), rule, prob, scale, None, anchors
-            )
+            if confirm_near:
+                raise _NotNear() from None
+            raise
+        if confirm_near and not confirms_near(near):
+            raise _NotNear()
         # Poses much nearer than the stereo depths say are not searched: the working floor is
         # for needles seen that near, not a licence for a near twin of a far one.
         floor = MIN_DEPTH if near is None else max(MIN_DEPTH, NEAR_SLACK * near)
         self.fitter.depth_range = (floor, MAX_DEPTH)
         t2 = time.perf_counter()
-        priors = tuple(priors)
         predicted = [p for p in priors if isinstance(p, PredictedPosePrior)]
         if previous is None and predicted:
             previous = self.stereo.left.T_cam_world @ np.asarray(predicted[0].T_world_needle)
@@ -263,6 +336,7 @@ class NeedleLocalizer:
         check_across_jaws(jaws, T_world, decided_by)
         check_held_place(priors, T_world, self.model, decided_by)
         t4 = time.perf_counter()
+        t0, t1 = call.t0, call.t1
         return NeedleEstimate(
             T_cam_needle=T_cam,
             T_world_needle=T_world,
@@ -284,6 +358,7 @@ class NeedleLocalizer:
             masks=(views[0], views[1]),
             priors=priors,
             exposure=exposure,
+            pixel_scale=self.pixel_scale,
         )
 
     def _without_stray_pieces(self, images, views, fit, attempts, inputs):

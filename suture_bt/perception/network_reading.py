@@ -4,11 +4,14 @@ keypoints to trust, and a depth hint from their stereo disparity (the localiser'
 
 from __future__ import annotations
 
+from dataclasses import dataclass
+
 import cv2
 import numpy as np
 import torch
 
 from suture_bt.interfaces import StereoCameraModel
+from suture_bt.perception.near_view import halved_pixels
 from suture_bt.perception.needle_masks import MAX_DEPTH, MIN_DEPTH
 from suture_bt.perception.network import OUTPUT_STRIDE, decode_ends, to_input
 
@@ -18,6 +21,21 @@ MIN_KEYPOINT_SCORE = 0.15
 MAX_CHORD_MARGIN = 1.2
 #: Base and tip keypoints closer than this (full-resolution px) are not trusted as two ends.
 MIN_END_SEPARATION_PX = 8.0
+
+
+@dataclass(frozen=True)
+class NetworkOutput:
+    """:func:`read_network`'s reading of a frame: coarse probabilities (2, h, w), keypoints
+    (2 eyes, 2 ends, 2) in the images' px, their scores (2, 2), image px per coarse px."""
+
+    prob: np.ndarray
+    keypoints: np.ndarray
+    scores: np.ndarray
+    scale: float
+
+    def halved(self) -> NetworkOutput:
+        """The same reading on the images halved (:mod:`near_view`)."""
+        return NetworkOutput(self.prob, halved_pixels(self.keypoints), self.scores, self.scale / 2)
 
 
 def net_input(rgb: np.ndarray, width: int) -> tuple[np.ndarray, float]:

@@ -55,7 +55,10 @@ def log_stereo(
         if estimate is None:  # refused: the images only, the old overlays cleared
             rec.log(base + "/overlay", rr.Clear(recursive=True))
             continue
-        outline = mask_outline(estimate.masks[i], s)
+        # Masks and keypoints are in the px the localiser measured in (halved for a near
+        # needle: ``pixel_scale`` 2).
+        px = getattr(estimate, "pixel_scale", 1.0)
+        outline = mask_outline(estimate.masks[i], s * px)
         if outline:
             rec.log(base + "/overlay/mask", rr.LineStrips2D(outline, colors=[(255, 60, 200)]))
         else:
@@ -64,7 +67,7 @@ def log_stereo(
         arc = cam.project(needle_points(needle, estimate.T_world_needle)) * s
         rec.log(base + "/overlay/fit", rr.LineStrips2D([arc], colors=[ESTIMATE], labels=["fit"]))
         if eye == "left":
-            kp = (np.asarray(estimate.keypoints_left, dtype=float) + 0.5) * s - 0.5
+            kp = (np.asarray(estimate.keypoints_left, dtype=float) + 0.5) * px * s - 0.5
             rec.log(
                 base + "/overlay/keypoints",
                 rr.Points2D(kp, labels=["base", "tip"], colors=[(255, 255, 0)], radii=[3.0]),
