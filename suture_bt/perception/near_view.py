@@ -29,8 +29,9 @@ import numpy as np
 
 from suture_bt.interfaces import CameraModel, StereoCameraModel
 
-#: Keypoint stereo depth (m) under which a frame is measured on the halved images: the 30-48 mm
-#: of the Task 3 start, not the 44-68 mm of the tree's presentations (they are not slow).
+#: Keypoint stereo depth (m) under which a frame is measured on the halved images: the nearer
+#: Task 3 starts, whose wire is widest, not the 44-68 mm of the tree's presentations. At 45 mm
+#: a held-out development answer with priors 44 mm away was refused halved (a rival 7° away).
 HALF_RES_DEPTH = 0.038
 #: The halved masks must put the needle's nearest possible depth (``NeedleMasks``' ``near``,
 #: 0.85 × the nearer of the keypoints' and the masks' depths) within this (m), else the

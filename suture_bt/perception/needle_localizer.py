@@ -3,7 +3,7 @@
 1. Both images, area-downsampled to the network width, go through the CNN in one batch:
    coarse needle mask + base/tip heatmaps (sub-pixel keypoints).
 2. Each eye's coarse mask gates a full-resolution colour test (:mod:`needle_masks`,
-   :mod:`colour_refine`). A needle the keypoints put nearer than 45 mm is measured from here
+   :mod:`colour_refine`). A needle the keypoints put nearer than 38 mm is measured from here
    on on the images halved, where it looks as a needle at the working distance does
    (:mod:`near_view`), unless the halved masks say it is not near.
 3. The stereo pose fit (:mod:`fit_attempts`, :mod:`pose_fit`) starts from the left keypoints,
