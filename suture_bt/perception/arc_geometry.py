@@ -9,9 +9,9 @@ import functools
 import math
 
 import numpy as np
-from numba import njit
 
 from suture_bt.geometry import NeedleModel
+from suture_bt.perception.compiled import kernel
 
 
 def arc_offsets(T: np.ndarray, points: np.ndarray, model: NeedleModel) -> np.ndarray:
@@ -32,7 +32,7 @@ def _ends(model: NeedleModel) -> np.ndarray:
     return ends
 
 
-@njit(cache=True)
+@kernel()
 def _arc_offsets(T, points, radius, tip_angle, base_angle, ends):
     """:func:`arc_offsets` per pose and point in one loop (``ends`` = tip, base in the
     needle frame)."""
@@ -52,8 +52,10 @@ def _arc_offsets(T, points, radius, tip_angle, base_angle, ends):
                 n0, n1, n2 = radius * math.cos(theta), radius * math.sin(theta), 0.0
             else:
                 e = 0
-                dt = (p0 - ends[0, 0]) ** 2 + (p1 - ends[0, 1]) ** 2 + (p2 - ends[0, 2]) ** 2
-                db = (p0 - ends[1, 0]) ** 2 + (p1 - ends[1, 1]) ** 2 + (p2 - ends[1, 2]) ** 2
+                t0, t1, t2 = p0 - ends[0, 0], p1 - ends[0, 1], p2 - ends[0, 2]
+                b0, b1, b2 = p0 - ends[1, 0], p1 - ends[1, 1], p2 - ends[1, 2]
+                dt = t0 * t0 + t1 * t1 + t2 * t2  # products, not ** 2: see compiled.py
+                db = b0 * b0 + b1 * b1 + b2 * b2
                 if db < dt:
                     e = 1
                 n0, n1, n2 = ends[e, 0], ends[e, 1], ends[e, 2]
@@ -83,7 +85,7 @@ def place_offsets(
     )
 
 
-@njit(cache=True)
+@kernel()
 def _place_offsets(T, point, places):
     """:func:`place_offsets` compiled (the fit calls it on small batches many times)."""
     K = T.shape[0]

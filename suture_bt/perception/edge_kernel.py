@@ -13,9 +13,10 @@ from __future__ import annotations
 import math
 
 import numpy as np
-from numba import njit, prange
+from numba import prange
 
 from suture_bt.geometry import NeedleModel
+from suture_bt.perception.compiled import kernel
 from suture_bt.perception.edge_residuals import N_THETA_GRID, EdgeRays
 from suture_bt.perception.tissue_cut import clamp_to_seen
 
@@ -28,7 +29,7 @@ _LOSS_CODES = {"cauchy": 0, "geman_mcclure": 1}
 FAST_MATH = {"contract", "arcp", "nsz"}
 
 
-@njit(cache=True, fastmath=FAST_MATH)
+@kernel(fastmath=FAST_MATH)
 def _turned(c, s, delta):
     """cos and sin of θ - delta from those of θ (series for the small steps of the search:
     exact to rounding for |delta| ≤ 0.25, the library's cos and sin beyond)."""
@@ -41,7 +42,7 @@ def _turned(c, s, delta):
     return c * cd + s * sd, s * cd - c * sd
 
 
-@njit(cache=True, fastmath=FAST_MATH)
+@kernel(fastmath=FAST_MATH)
 def _nearest_angle(o0, o1, o2, d0, d1, d2, rad, lo, hi, gv, gc, gs, start, c, s):
     """:func:`edge_residuals.nearest_arc_angle` for one ray, with its cosine and sine: a grid
     search over the angles ``gv`` (cosines ``gc``, sines ``gs``) unless ``start`` ≥ lo - 1
@@ -71,13 +72,14 @@ def _nearest_angle(o0, o1, o2, d0, d1, d2, rad, lo, hi, gv, gc, gs, start, c, s)
     return theta, c, s
 
 
-@njit(cache=True, fastmath=FAST_MATH)
+@kernel(fastmath=FAST_MATH)
 def _irls(r, sigma, loss):
-    q = 1.0 + (r / sigma) ** 2
+    u = r / sigma
+    q = 1.0 + u * u  # not u ** 2: see compiled.py
     return 1.0 / q if loss == 0 else 1.0 / (q * q)
 
 
-@njit(cache=True, parallel=True, fastmath=FAST_MATH)
+@kernel(parallel=True, fastmath=FAST_MATH)
 def angle_grid(lo, hi, grid):
     """The nearest-angle search's grid: ``grid`` angles lo..hi with their cosines and sines,
     compiled as :func:`edge_system` computed them, in a parallel function with its licences
@@ -87,7 +89,7 @@ def angle_grid(lo, hi, grid):
     return gv, np.cos(gv), np.sin(gv)
 
 
-@njit(cache=True, fastmath=FAST_MATH)
+@kernel(fastmath=FAST_MATH)
 def edge_pose(
     k, T, T6, steps, origins, dirs, dz, focal, rad, wire, lo, hi, gv, gc, gs, theta_start,
     cs_start, sigma, loss, want_system, seeded, cut, spans, dspans, r, theta, cs, A, g,
@@ -186,7 +188,7 @@ def edge_pose(
                 A[k, i, j] = A[k, j, i]
 
 
-@njit(cache=True, parallel=True, fastmath=FAST_MATH)
+@kernel(parallel=True, fastmath=FAST_MATH)
 def edge_system(
     T, T6, steps, origins, dirs, dz, focal, rad, wire, lo, hi, grid, theta_start,
     cs_start, sigma, loss, want_system, spans, dspans,

@@ -5,10 +5,10 @@ from __future__ import annotations
 import math
 
 import numpy as np
-from numba import njit
 
 from suture_bt.geometry import NeedleModel
 from suture_bt.interfaces import StereoCameraModel
+from suture_bt.perception.compiled import kernel
 from suture_bt.transforms import invert
 
 #: Centre-line samples per eye for the free-space term, and its weight.
@@ -104,7 +104,7 @@ class EndPriorTerm:
         return np.full(self.n, END_PRIOR_SHARE * n_edge / self.n)
 
 
-@njit(cache=True)
+@kernel()
 def _nearer_end_distances(T, T_eye_left, fx, fy, cx, cy, ends, kp):
     """(K, M) pixel distance from each keypoint (M, 2) to the nearer of the two model ends
     (2, 3, needle frame) projected into one eye under each pose T (K, 4, 4, left frame):

@@ -20,11 +20,12 @@ import math
 
 import numba
 import numpy as np
-from numba import njit, prange
+from numba import prange
 
 from suture_bt.geometry import NeedleModel
 from suture_bt.interfaces import StereoCameraModel
 from suture_bt.perception.arc_geometry import _arc_offsets, _ends, _place_offsets
+from suture_bt.perception.compiled import kernel
 from suture_bt.perception.edge_kernel import angle_grid, edge_pose
 from suture_bt.perception.edge_residuals import N_THETA_GRID, EdgeRays
 from suture_bt.perception.fit_terms import EndPriorTerm, _nearer_end_distances
@@ -36,7 +37,7 @@ from suture_bt.perception.tissue_cut import grid_circle, span_derivatives, spans
 _KEYPOINTS, _POINTS, _PLACES = 0, 1, 2
 
 
-@njit(cache=True)
+@kernel()
 def _with_extra_terms(A_edge, g_edge, rx, E6, extra_w, steps, sigma, loss_code):
     """The normal equations (K, 6, 6), (K, 6) of the edge residuals plus the extra terms':
     residuals rx (K, M) at the poses, E6 (K, 6, M) at the poses stepped by ``steps``, their
@@ -51,7 +52,8 @@ def _with_extra_terms(A_edge, g_edge, rx, E6, extra_w, steps, sigma, loss_code):
     for k in range(K):
         for m in range(M):
             r = rx[k, m]
-            q = 1.0 + (r / sigma) ** 2
+            u = r / sigma
+            q = 1.0 + u * u  # not u ** 2: see compiled.py
             w = extra_w[m] * (1.0 / q if loss_code == 0 else 1.0 / (q * q))
             if not math.isfinite(w):
                 w = 0.0
@@ -68,7 +70,7 @@ def _with_extra_terms(A_edge, g_edge, rx, E6, extra_w, steps, sigma, loss_code):
     return A, g
 
 
-@njit(cache=True)
+@kernel()
 def damped_steps(A: np.ndarray, g: np.ndarray, lam: np.ndarray) -> np.ndarray:
     """Levenberg-Marquardt steps -(A + λ (diag A + 1e-9))⁻¹ g per row (K, 6, 6), (K, 6), (K,),
     by Cholesky (A is a Gauss-Newton matrix, so the damped one is positive definite); NaN
@@ -166,7 +168,7 @@ def compiled_terms(extras: list, model: NeedleModel):
     )
 
 
-@njit(cache=True)
+@kernel()
 def _extra_residuals(T, terms, radius, tip_angle, base_angle):
     """The extra terms' residuals (K, M) at poses T (K, 4, 4), as each term's own call gives
     them (:meth:`EndPriorTerm.__call__`, :meth:`PriorTerm.__call__`, in the same arithmetic)."""
@@ -227,7 +229,7 @@ def trial_arrays(rays: EdgeRays, stereo: StereoCameraModel, model: NeedleModel, 
 SERIAL_MAX_POSES = 1
 
 
-@njit(cache=True)
+@kernel()
 def lm_trial(x, take_step, A_edge, g_edge, r, E6, extra_w, lam, steps, sigma, loss, stepped,
              theta, cs, fixed):  # fmt: skip
     """One trial: parameters x (K, 6) stepped (``take_step``) by the damped normal equations
@@ -268,7 +270,7 @@ def lm_trial(x, take_step, A_edge, g_edge, r, E6, extra_w, lam, steps, sigma, lo
     return xn, T, T6, E6n, rn, th, csn, An, gn
 
 
-@njit(cache=True, parallel=True)
+@kernel(parallel=True)
 def _rows_parallel(K, args, out):
     """:func:`_trial_row` over the poses on numba's threads. The parallel loop takes arrays
     and numbers only, not tuples of them: the tuples are taken apart here and put together
@@ -296,14 +298,14 @@ def _rows_parallel(K, args, out):
         )  # fmt: skip
 
 
-@njit(cache=True)
+@kernel()
 def _rows_serial(K, args, out):
     """:func:`_trial_row` over the poses on the calling thread."""
     for k in range(K):
         _trial_row(k, args, out)
 
 
-@njit(cache=True)
+@kernel()
 def _trial_row(k, args, out):
     """Pose k of :func:`lm_trial` (its arguments ``args`` and grids; ``out`` its arrays, of
     which this writes row k): the step, the pose and its stepped copies, the extra terms'
@@ -363,7 +365,7 @@ def _trial_row(k, args, out):
     )  # fmt: skip
 
 
-@njit(cache=True)
+@kernel()
 def _pose_differences(T6, T, steps):
     """The forward differences (1, 6, 4, 4) of one pose T from its stepped copies T6, in
     the arithmetic :meth:`~.tissue_cut.TissueCut.spans_and_derivatives` uses (compiled

@@ -15,10 +15,10 @@ import math
 
 import cv2
 import numpy as np
-from numba import njit
 
 from suture_bt.geometry import NeedleModel
 from suture_bt.interfaces import CameraModel
+from suture_bt.perception.compiled import kernel
 
 
 def _unit(v: np.ndarray) -> np.ndarray:
@@ -75,7 +75,7 @@ def params_to_pose(params: np.ndarray, cam: CameraModel, model: NeedleModel) -> 
     return out.reshape(x.shape[:-1] + (4, 4))
 
 
-@njit(cache=True)
+@kernel()
 def _poses_from_params(x, fx, fy, cx, cy, Bn, chord, h):
     """Rows of :func:`params_to_pose`: the ends' rays, their depths by the law of sines from
     the chord, the arc plane turned by psi about the chord."""
@@ -120,7 +120,7 @@ def _poses_from_params(x, fx, fy, cx, cy, Bn, chord, h):
     return out
 
 
-@njit(cache=True)
+@kernel()
 def _cross_into(a, b, out):
     out[0] = a[1] * b[2] - a[2] * b[1]
     out[1] = a[2] * b[0] - a[0] * b[2]

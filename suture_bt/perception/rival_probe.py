@@ -58,11 +58,11 @@ from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 
 import numpy as np
-from numba import njit
 from scipy.spatial.transform import Rotation
 
 from suture_bt.geometry import NeedleModel
 from suture_bt.interfaces import CameraModel, StereoCameraModel
+from suture_bt.perception.compiled import kernel
 from suture_bt.perception.edge_residuals import EdgeRays
 from suture_bt.perception.fit_solver import levenberg_marquardt
 from suture_bt.perception.needle_projection import (
@@ -199,7 +199,7 @@ def pose_offset(Ta: np.ndarray, Tb: np.ndarray) -> tuple[float, float]:
     return float(mm), float(deg)
 
 
-@njit(cache=True)
+@kernel()
 def _pose_offset(Ta, Tb):
     """:func:`pose_offset` compiled (the probes ask it thousands of times a call): the angle
     from the trace of Raᵀ Rb, the distance between the origins."""
@@ -210,7 +210,8 @@ def _pose_offset(Ta, Tb):
     c = min(max((tr - 1.0) / 2.0, -1.0), 1.0)
     d = 0.0
     for i in range(3):
-        d += (Ta[i, 3] - Tb[i, 3]) ** 2
+        e = Ta[i, 3] - Tb[i, 3]
+        d += e * e  # not e ** 2: see compiled.py
     return 1e3 * math.sqrt(d), math.degrees(math.acos(c))
 
 

@@ -21,9 +21,10 @@ import math
 from dataclasses import dataclass
 
 import numpy as np
-from numba import njit, prange
+from numba import prange
 
 from suture_bt.geometry import NeedleModel
+from suture_bt.perception.compiled import kernel
 
 #: Samples of the arc angle over which hidden spans are found (their ends are then exact).
 N_CUT_SAMPLES = 24
@@ -118,7 +119,7 @@ class TissueCut:
         return s0, d
 
 
-@njit(cache=True)
+@kernel()
 def _root(A, B, C, u, v):
     """The angle in [u, v] where A cos θ + B sin θ + C = 0 (NaN: none)."""
     rho = math.hypot(A, B)
@@ -135,7 +136,7 @@ def _root(A, B, C, u, v):
     return np.nan
 
 
-@njit(cache=True)
+@kernel()
 def _sample(A, B, C, G, act, D, c, s):
     """The arc point at (cos, sin) = (c, s) against the pieces (plane offsets G) the circle
     reaches (``act``): how far outside the tissue it is (the least of each piece's highest
@@ -152,7 +153,7 @@ def _sample(A, B, C, G, act, D, c, s):
     return out, deep
 
 
-@njit(cache=True)
+@kernel()
 def _boundary(A, B, C, G, act, D, u, v):
     """Where 'inside a piece' changes within [u, v]: among the roots there of the planes of
     the pieces the circle reaches, the one where the tissue height (:func:`_sample`) is
@@ -171,7 +172,7 @@ def _boundary(A, B, C, G, act, D, u, v):
     return arg, plane
 
 
-@njit(cache=True, inline="always")
+@kernel(inline="always")
 def spans_of_pose(k, T, P, N, G, D, rad, lo, hi, shift, grid, gc, gs, out, planes):
     """:func:`hidden_spans` for pose k alone, written into row k of ``out`` (NaN on entry)
     and ``planes`` (-1 on entry); ``gc``, ``gs``: the grid's cosines and sines. The compiled
@@ -226,7 +227,7 @@ def spans_of_pose(k, T, P, N, G, D, rad, lo, hi, shift, grid, gc, gs, out, plane
                 planes[k, j, e] = -1
 
 
-@njit(cache=True)
+@kernel()
 def spans_of_poses(k0, k1, T, P, N, G, D, rad, lo, hi, shift, grid, gc, gs, out, planes):
     """:func:`spans_of_pose` for poses k0..k1-1 on the calling thread (a loop, as
     :func:`hidden_spans` runs it: inlined alone elsewhere the compiled code differs in the
@@ -235,14 +236,14 @@ def spans_of_poses(k0, k1, T, P, N, G, D, rad, lo, hi, shift, grid, gc, gs, out,
         spans_of_pose(k, T, P, N, G, D, rad, lo, hi, shift, grid, gc, gs, out, planes)
 
 
-@njit(cache=True, parallel=True)
+@kernel(parallel=True)
 def grid_circle(grid):
     """Cosines and sines of the span search's grid angles, computed once for the compiled
     LM trial, in a parallel function as :func:`hidden_spans` computes them."""
     return np.cos(grid), np.sin(grid)
 
 
-@njit(cache=True, parallel=True)
+@kernel(parallel=True)
 def hidden_spans(T, P, N, G, D, rad, lo, hi, shift, grid):
     """Spans (K, 2, 2) of arc angle inside the tissue (planes: points P, normals N; Q each;
     pieces: plane offsets G, depths D) for poses T (K, 4, 4): found on ``grid`` (angles
@@ -259,7 +260,7 @@ def hidden_spans(T, P, N, G, D, rad, lo, hi, shift, grid):
     return out, planes
 
 
-@njit(cache=True)
+@kernel()
 def span_derivatives(spans, planes, T, dT, N, rad, shift):
     """d(span ends)/d(parameter) (K, 6, 2, 2) from the poses' derivatives dT (K, 6, 4, 4):
     an end on plane q (set back by ``shift`` from the root, as :func:`hidden_spans` does) is a
@@ -293,7 +294,7 @@ def span_derivatives(spans, planes, T, dT, N, rad, shift):
     return out
 
 
-@njit(cache=True)
+@kernel()
 def clamp_to_seen(th, spans, lo, hi):
     """The arc angle ``th`` moved out of a hidden span (2, 2) to its nearer end that meets
     the seen arc; (angle, span index, end index) with -1 when it was not hidden."""
@@ -308,7 +309,7 @@ def clamp_to_seen(th, spans, lo, hi):
     return th, -1, -1
 
 
-@njit(cache=True)
+@kernel()
 def clamp_all(theta, spans, lo, hi):
     """:func:`clamp_to_seen` over angles (K, N) with each pose's spans (K, 2, 2)."""
     out = theta.copy()
