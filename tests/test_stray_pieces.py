@@ -2,15 +2,18 @@
 needle's own pieces, the swage band and blobs far from the arc are left alone."""
 
 import numpy as np
+import pytest
 from perception_helpers import stereo
 from scipy.spatial.transform import Rotation
 
 from suture_bt.geometry import NeedleModel
 from suture_bt.perception.mask_view import MaskView, edge_points
 from suture_bt.perception.needle_projection import project_cam, rasterize_needle
+from suture_bt.perception.refusal import NeedleNotFound
 from suture_bt.perception.stray_pieces import (
     edge_point_labels,
     piece_labels,
+    refit_without_stray_pieces,
     stray_pieces,
     without,
 )
@@ -86,3 +89,40 @@ def test_edge_points_are_labelled_by_their_own_piece():
     n, lab = piece_labels(view)
     point_lab = edge_point_labels(lab, edge_points(view), view.origin)
     assert point_lab.min() >= 1 and set(np.unique(point_lab)) == set(range(1, n))
+
+
+class _Fit:
+    T_cam_needle = T
+
+
+def _refit(views, attempts):
+    images = [_scene(3.0, eye=e)[0] for e in (0, 1)]
+    return refit_without_stray_pieces(
+        images, views, _Fit(), attempts, ("inputs",), STEREO, MODEL, None
+    )
+
+
+def test_the_refit_runs_without_the_stray_pieces_and_only_when_there_are_some():
+    calls = []
+
+    def attempts(images, views, *inputs):
+        calls.append((views, inputs))
+        return "refit"
+
+    views = tuple(_scene(3.0, eye=e)[1] for e in (0, 1))
+    got_views, fit = _refit(views, attempts)
+    assert fit == "refit" and calls[0][1] == ("inputs",)
+    assert all(g.mask.sum() == v.mask.sum() - 25 for g, v in zip(got_views, views, strict=True))
+    clean = tuple(_scene(20.0, eye=e)[1] for e in (0, 1))  # the blob off the arc: not stray
+    calls.clear()
+    got_views, fit = _refit(clean, attempts)
+    assert got_views is clean and isinstance(fit, _Fit) and not calls
+
+
+def test_a_refused_refit_names_the_pieces_it_dropped():
+    def attempts(images, views, *inputs):
+        raise NeedleNotFound("the seen part leaves the pose loose")
+
+    views = tuple(_scene(3.0, eye=e)[1] for e in (0, 1))
+    with pytest.raises(NeedleNotFound, match="25 and 25 px.*leaves the pose loose"):
+        _refit(views, attempts)

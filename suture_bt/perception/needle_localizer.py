@@ -84,7 +84,7 @@ from suture_bt.perception.spread_limits import (  # noqa: F401 - the limits, re-
     check_spread_in_tissue,
 )
 from suture_bt.perception.stereo_window import Window, right_window
-from suture_bt.perception.stray_pieces import stray_pieces, without
+from suture_bt.perception.stray_pieces import refit_without_stray_pieces
 from suture_bt.perception.tissue_slide import check_tissue_slide, tissue_slide
 
 #: Left coarse probability over which a pixel may be needle the right eye's window must hold
@@ -241,10 +241,9 @@ class NeedleLocalizer:
         t1 = time.perf_counter()
         reading = NetworkOutput(prob, kp, raw_score, scale)
         call = _Call(rule, previous, tuple(priors), gates, t0, t1)
+        hint = self._hint(reading)
         if self.halve_near:
-            score = self.plausible(kp, raw_score, prob, scale)
-            _, depth = trusted_ends_and_depth(kp, score, self.stereo)
-            if wants_half(depth, left.shape):
+            if wants_half(hint[2], left.shape):
                 try:
                     return self._halved()._measure(
                         (halved(left), halved(right)), reading.halved(), call, confirm_near=True
@@ -257,7 +256,13 @@ class NeedleLocalizer:
                         exc.args = (exc.reason,)
                         raise
                     # With the task's priors full resolution decides (near_view).
-        return self._measure((left, right), reading, call)
+        return self._measure((left, right), reading, call, hint=hint)
+
+    def _hint(self, reading: NetworkOutput) -> tuple:
+        """The keypoint scores kept as plausible at this localiser's resolution, and the
+        trusted end keypoints and stereo depth they give (:func:`trusted_ends_and_depth`)."""
+        score = self.plausible(reading.keypoints, reading.scores, reading.prob, reading.scale)
+        return (score, *trusted_ends_and_depth(reading.keypoints, score, self.stereo))
 
     def _halved(self) -> NeedleLocalizer:
         """This localiser on the halved images (:mod:`near_view`): its cameras at half width
@@ -269,16 +274,21 @@ class NeedleLocalizer:
         return half
 
     def _measure(
-        self, images, reading: NetworkOutput, call: _Call, confirm_near: bool = False
+        self,
+        images,
+        reading: NetworkOutput,
+        call: _Call,
+        confirm_near: bool = False,
+        hint: tuple | None = None,
     ) -> NeedleEstimate:
         """Everything after the network (masks, fit, gates, base or tip) on ``images`` at this
         localiser's resolution. ``confirm_near``: raise :class:`_NotNear` unless the masks
-        put the needle near (:func:`~.near_view.confirms_near`), or when they fail."""
+        put the needle near (:func:`~.near_view.confirms_near`), or when they fail. ``hint``:
+        :meth:`_hint` of ``reading`` at this resolution, when already made."""
         left, right = images
         prob, kp, raw_score, scale = reading.prob, reading.keypoints, reading.scores, reading.scale
         rule, previous, priors, gates = call.rule, call.previous, call.priors, call.gates
-        score = self.plausible(kp, raw_score, prob, scale)
-        ends, depth = trusted_ends_and_depth(kp, score, self.stereo)
+        score, ends, depth = hint or self._hint(reading)
         # The needle's coarse blob is the one at the trusted end keypoints (coarse px).
         anchors = [(kp[e][score[e] >= MIN_KEYPOINT_SCORE] + 0.5) / scale - 0.5 for e in (0, 1)]
         try:
@@ -312,7 +322,11 @@ class NeedleLocalizer:
         attempts = FitAttempts(self.stereo, self.model, rule, self.fitter, gates)
         fit = attempts((left, right), views, ends, depth, half_width, previous, kp, score, priors)
         inputs = (ends, depth, half_width, previous, kp, score, priors)
-        views, fit = self._without_stray_pieces((left, right), views, fit, attempts, inputs)
+        if self.drop_stray_pieces:
+            cut = self.fitter.tissue_cut(priors)
+            views, fit = refit_without_stray_pieces(
+                (left, right), views, fit, attempts, inputs, self.stereo, self.model, cut
+            )
         check_spread_in_tissue(
             fit.T_world_needle,
             fit.angle_std_deg,
@@ -360,31 +374,6 @@ class NeedleLocalizer:
             exposure=exposure,
             pixel_scale=self.pixel_scale,
         )
-
-    def _without_stray_pieces(self, images, views, fit, attempts, inputs):
-        """The views and fit again without the mask pieces the answer runs through but does
-        not explain as wire (:mod:`stray_pieces`: a jaw's blade taken for wire); unchanged
-        when there are none. A refusal of the refit says which pieces were dropped."""
-        if not self.drop_stray_pieces:
-            return views, fit
-        cut = self.fitter.tissue_cut(inputs[-1])
-        stray = [
-            stray_pieces(img, view, eye, fit.T_cam_needle, self.stereo, self.model, cut)
-            for eye, (img, view) in enumerate(zip(images, views, strict=True))
-        ]
-        if not any(s.any() for s in stray):
-            return views, fit
-        views = tuple(without(v, s) for v, s in zip(views, stray, strict=True))
-        try:
-            return views, attempts(images, views, *inputs)
-        except NeedleNotFound as exc:
-            px = " and ".join(str(int(s.sum())) for s in stray)
-            exc.reason = (
-                f"without mask pieces the first answer ran through but did not explain as "
-                f"wire ({px} px, left and right: a jaw's blade?): {exc.reason}"
-            )
-            exc.args = (exc.reason,)
-            raise
 
     def seen_pixels(self, image_height: int) -> tuple[np.ndarray, np.ndarray]:
         """Full-resolution pixels (N×2, u v) where the last call's network saw needle, per

@@ -31,6 +31,7 @@ from suture_bt.perception.colour_refine import BAND_PIXEL_SCORE, violet_score
 from suture_bt.perception.edge_residuals import edge_rays, residuals
 from suture_bt.perception.mask_view import MaskView, edge_points
 from suture_bt.perception.occlusion import BAND_PIECE_SHARE
+from suture_bt.perception.refusal import NeedleNotFound
 from suture_bt.perception.tissue_cut import TissueCut
 
 #: A piece with a median edge residual (px) above this is not explained as wire...
@@ -109,3 +110,27 @@ def without(view: MaskView, pieces: np.ndarray) -> MaskView:
     grown = cv2.dilate(pieces.astype(np.uint8), np.ones((3, 3), np.uint8)).astype(bool)
     occluder = grown if view.occluder is None else (view.occluder | grown)
     return replace(view, mask=mask, occluder=occluder & ~mask)
+
+
+def refit_without_stray_pieces(images, views, fit, attempts, inputs, stereo, model, cut):
+    """The views and fit (of ``attempts`` on ``images``, ``views`` and the rest of its
+    ``inputs``) again without the mask pieces the answer runs through but does not explain
+    as wire (a jaw's blade taken for wire); unchanged when there are none. ``cut`` is the
+    tissue's cut of the fit's priors. A refusal of the refit says which pieces were dropped."""
+    stray = [
+        stray_pieces(img, view, eye, fit.T_cam_needle, stereo, model, cut)
+        for eye, (img, view) in enumerate(zip(images, views, strict=True))
+    ]
+    if not any(s.any() for s in stray):
+        return views, fit
+    views = tuple(without(v, s) for v, s in zip(views, stray, strict=True))
+    try:
+        return views, attempts(images, views, *inputs)
+    except NeedleNotFound as exc:
+        px = " and ".join(str(int(s.sum())) for s in stray)
+        exc.reason = (
+            f"without mask pieces the first answer ran through but did not explain as "
+            f"wire ({px} px, left and right: a jaw's blade?): {exc.reason}"
+        )
+        exc.args = (exc.reason,)
+        raise
