@@ -18,6 +18,7 @@ from suture_bt.perception.lm_step import (
 )
 from suture_bt.perception.needle_projection import params_to_pose
 from suture_bt.perception.prior_term import PriorTerm, prior_information
+from suture_bt.perception.robust_cost import LOSSES, robust_cost  # noqa: F401 - re-exported
 
 #: Finite-difference steps of the six parameters (px, px, px, px, rad, rad) for the pose's
 #: derivatives and the extra terms' (the edge residuals' derivatives are analytic).
@@ -25,28 +26,11 @@ FD_STEPS = np.array([0.02, 0.02, 0.02, 0.02, 2e-5, 2e-4])
 #: No step, then FD_STEPS in each parameter in turn (rows of a pose and its stepped poses).
 _STEPS = np.concatenate([np.zeros((1, 6)), np.diag(FD_STEPS)])
 
-#: Robust losses of the fit: Cauchy (outliers grow logarithmically; a wide basin for the
-#: search) and Geman-McClure (outliers cost a constant; the pose that explains the most edge
-#: points tightly wins, however a few stray mask pixels lie).
-LOSSES = ("cauchy", "geman_mcclure")
-
 
 def _irls_weights(r: np.ndarray, sigma: float, loss: str) -> np.ndarray:
     """IRLS weights ψ(r)/r of the loss."""
     q = 1.0 + (r / sigma) ** 2
     return 1.0 / q if loss == "cauchy" else 1.0 / q**2
-
-
-def robust_cost(
-    r: np.ndarray, sigma: float, weights: np.ndarray | None = None, loss: str = "cauchy"
-) -> np.ndarray:
-    """(Weighted) mean robust loss per start (inf where any residual is undefined)."""
-    if loss not in LOSSES:
-        raise ValueError(f"unknown loss {loss!r}; expected one of {LOSSES}")
-    x2 = (r / sigma) ** 2
-    c = 0.5 * sigma**2 * (np.log1p(x2) if loss == "cauchy" else x2 / (1.0 + x2))
-    out = c.mean(-1) if weights is None else (c * weights).sum(-1) / weights.sum()
-    return np.where(np.isfinite(out), out, np.inf)
 
 
 def _pose_derivatives(x: np.ndarray, T: np.ndarray, cam, model: NeedleModel):
