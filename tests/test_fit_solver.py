@@ -7,6 +7,7 @@ import pytest
 from suture_bt.perception.fit_solver import (
     FD_STEPS,
     _irls_weights,
+    _take_better,
     _with_extra_terms,
     damped_steps,
     robust_cost,
@@ -67,3 +68,33 @@ def test_the_extra_terms_add_their_weighted_difference_jacobian_to_the_normal_eq
     np.testing.assert_allclose(g2, g + (Jw @ r[..., None])[..., 0], rtol=1e-12, atol=1e-9)
     assert np.isfinite(A2).all() and np.isfinite(g2).all()
     assert not np.shares_memory(A2, A)  # the edge part is left as it was
+
+
+def test_take_better_takes_exactly_the_cheaper_rows_of_every_field():
+    """The LM state's rows whose trial was cheaper come from the trial, in every field (cos
+    and sin hold their rows second; E6 may be absent); all or none taken: one or the other."""
+    rng = np.random.default_rng(0)
+    K = 5
+    shapes = [(K, 6), (K, 4, 4), (K, 6, 4, 4), (K, 6, 3), (K, 9), (K, 7), (2, K, 7), (K, 6, 6)]
+    shapes += [(K, 6), (K,)]
+
+    def fields():
+        out = [rng.random(s) for s in shapes]
+        out[3] = None  # no extra terms
+        return tuple(out)
+
+    state, trial = fields(), fields()
+    before = tuple(None if a is None else a.copy() for a in state)
+    better = np.array([True, False, True, False, False])
+    got = _take_better(better, state, trial)
+    assert got is state
+    for i, (g, b, t) in enumerate(zip(got, before, trial, strict=True)):
+        if g is None:
+            continue
+        rows = (slice(None), better) if i == 6 else (better,)
+        keep = (slice(None), ~better) if i == 6 else (~better,)
+        assert np.array_equal(g[rows], t[rows]) and np.array_equal(g[keep], b[keep]), i
+    assert _take_better(np.ones(K, bool), state, trial) is trial
+    same = tuple(None if a is None else a.copy() for a in state)
+    assert _take_better(np.zeros(K, bool), state, trial) is state
+    assert all(a is None or np.array_equal(a, c) for a, c in zip(state, same, strict=True))

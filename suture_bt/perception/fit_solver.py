@@ -173,10 +173,13 @@ def _take_better(better: np.ndarray, state: tuple, trial: tuple) -> tuple:
         return trial
     if better.any():
         for i, (old, new) in enumerate(zip(state, trial, strict=True)):
-            if i == 6:
-                old[:, better] = new[:, better]
-            elif old is not None:
-                old[better] = new[better]
+            if old is None:
+                continue
+            # In place under a mask: no gathered copies (a third of the time indexing took).
+            rows = (
+                better[None, :, None] if i == 6 else better.reshape((-1,) + (1,) * (old.ndim - 1))
+            )
+            np.copyto(old, new, where=rows)
     return state
 
 
