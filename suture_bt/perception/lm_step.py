@@ -16,6 +16,7 @@ The extra terms the trial knows are the fit's own (:class:`~.fit_terms.EndPriorT
 
 from __future__ import annotations
 
+import functools
 import math
 
 import numba
@@ -220,8 +221,16 @@ def trial_arrays(rays: EdgeRays, stereo: StereoCameraModel, model: NeedleModel, 
     else:
         groups, depths, _, _, _, shift, grid = cut._args
         tissue = (True, cut.points, cut.normals, groups, depths, shift, grid)
-    grids = angle_grid(shape[2], shape[3], N_THETA_GRID) + grid_circle(tissue[6])
+    grids = _angle_grid(shape[2], shape[3], N_THETA_GRID) + grid_circle(tissue[6])
     return camera, edge, shape, tissue, terms, grids
+
+
+@functools.lru_cache(maxsize=8)
+def _angle_grid(lo: float, hi: float, grid: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """:func:`~.edge_kernel.angle_grid`, made once per needle shape: a parallel kernel's start
+    costs about 70 µs, and every LM call of a frame asked for the same grid. The kernels only
+    read it (left writeable: a read-only array is another type to numba, compiled anew)."""
+    return angle_grid(lo, hi, grid)
 
 
 #: Trials of at most this many poses run their poses on the calling thread: starting the
