@@ -18,7 +18,7 @@ from suture_bt.perception.lm_step import (
 )
 from suture_bt.perception.needle_projection import params_to_pose
 from suture_bt.perception.prior_term import PriorTerm, prior_information
-from suture_bt.perception.robust_cost import LOSSES, robust_cost  # noqa: F401 - re-exported
+from suture_bt.perception.robust_cost import robust_cost
 
 #: Finite-difference steps of the six parameters (px, px, px, px, rad, rad) for the pose's
 #: derivatives and the extra terms' (the edge residuals' derivatives are analytic).

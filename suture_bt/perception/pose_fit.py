@@ -43,10 +43,8 @@ from suture_bt.perception.fit_result import PoseFitResult
 from suture_bt.perception.fit_search import StartSearch
 from suture_bt.perception.fit_solver import (  # noqa: F401 - re-exported
     FD_STEPS,
-    LOSSES,
     levenberg_marquardt,
     pose_uncertainty,
-    robust_cost,
 )
 from suture_bt.perception.fit_starts import (
     DISTINCT,
@@ -73,6 +71,7 @@ from suture_bt.perception.needle_projection import (
 from suture_bt.perception.prior_term import PriorTerm
 from suture_bt.perception.refusal import NeedleNotFound
 from suture_bt.perception.rival_probe import FitRays
+from suture_bt.perception.robust_cost import LOSSES, robust_cost  # noqa: F401 - re-exported
 from suture_bt.perception.tissue_cut import TissueCut
 
 #: A clearly different second-stage pose costing at most this much more than the best also
