@@ -153,6 +153,7 @@ def _localize_row(loc, left, right, T_true, priors, repeat: int = 1) -> dict:
         "seen_mm": [1e3 * x for x in est.exposure.seen],
         "tie_ratio": est.fit.tie_ratio if np.isfinite(est.fit.tie_ratio) else None,
         "ends_moved_px": est.fit.ends_moved_px if np.isfinite(est.fit.ends_moved_px) else None,
+        "valley_ratio": est.fit.valley_ratio if np.isfinite(est.fit.valley_ratio) else None,
     }
 
 

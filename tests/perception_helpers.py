@@ -89,7 +89,8 @@ def recorded_fit(name: str):
     a fitter at 1920×1080 with the call's depth range and, where the record holds the
     phantom's pose, that phantom's tissue solid (the localiser's), the call's arguments (masks
     with their occluders, keypoints or None) and keyword arguments (depth hint, alternatives, end
-    priors, whether an end may be hidden), and the needle's true pose (left camera)."""
+    priors, whether an end may be hidden; a NaN depth hint is none), and the needle's true pose
+    (left camera)."""
     from pathlib import Path
 
     from suture_bt.geometry import NeedleModel, PhantomModel
@@ -109,7 +110,7 @@ def recorded_fit(name: str):
     if "T_world_phantom" in d:
         fitter.tissue_solid = solid_pieces(PhantomModel(d["T_world_phantom"]))
     kwargs = dict(
-        depth_hint=float(d["depth_hint"]),
+        depth_hint=None if np.isnan(d["depth_hint"]) else float(d["depth_hint"]),
         alternatives=[tuple(a) for a in d["alternatives"]],
         end_priors=(d["end_priors_left"], d["end_priors_right"]),
         hidden_end=bool(d["hidden_end"]),

@@ -26,6 +26,7 @@ from suture_bt.perception.spread_limits import (
     angle_std_limit,
 )
 from suture_bt.perception.tissue_slide import MAX_TISSUE_SLIDE_DEG
+from suture_bt.perception.valley_probe import MAX_VALLEY_RATIO
 
 #: A final fit whose RMS edge residual exceeds this (px) is refused: over six benchmark sets
 #: (1,200 scenes: 1080p and 480p, unoccluded and occluded, two seeds) every correct fit stayed
@@ -84,6 +85,9 @@ class AnswerGates:
     #: ``short_seen`` (m of arc), without priors (:mod:`short_tie`).
     max_tie_ratio_short: float = MAX_TIE_RATIO_SHORT
     short_seen: float = SHORT_SEEN
+    #: The cheapest pose a few degrees from the answer within this ratio of its cost refuses
+    #: it (:mod:`valley_probe`).
+    max_valley_ratio: float = MAX_VALLEY_RATIO
     #: An answer whose ends moved farther (px) from every end hypothesis is refit from them.
     refit_moved_px: float = REFIT_MOVED_PX
     #: Arc (m) a fit may leave unseen with nothing hiding it (inf: no check).

@@ -14,7 +14,8 @@ from suture_bt.perception.fit_solver import pose_uncertainty
 from suture_bt.perception.fit_starts import ends_moved
 from suture_bt.perception.needle_projection import end_pixels, params_to_pose
 from suture_bt.perception.prior_term import PriorTerm
-from suture_bt.perception.rival_probe import oblique_slides, rival, tie_ratio
+from suture_bt.perception.rival_probe import FitRays, oblique_slides, rival, tie_ratio
+from suture_bt.perception.valley_probe import valley_ratio
 
 if TYPE_CHECKING:
     from suture_bt.perception.fit_search import StartSearch
@@ -47,6 +48,13 @@ def answer_result(
     ang_std, pos_std = pose_uncertainty(
         xf[b], rays, fitter.stereo, model, 1.0, fitter.final_loss, prior_term
     )
+    valley, valley_deg = float("inf"), float("nan")
+    if fitter.probe_valley:
+        polish = [t for t in search.terms if t.polish] + ([prior_term] if prior_term else [])
+        fit_rays = FitRays(rays, search.coarse, search.mid)
+        valley, valley_deg = valley_ratio(
+            xf[b], float(cf[b]), fit_rays, fitter.stereo, model, polish, fitter.final_loss
+        )
     return PoseFitResult(
         T_cam_needle=T,
         T_world_needle=cam.T_world_cam @ T,
@@ -64,5 +72,7 @@ def answer_result(
         rival_ratio=rival_ratio,
         rival_offset=rival_offset,
         tie_ratio=tie,
+        valley_ratio=valley,
+        valley_deg=valley_deg,
         ends_moved_px=ends_moved(np.asarray(end_pixels(cam, T, model)), search.tried),
     )

@@ -190,6 +190,13 @@ class FitAttempts:
                 f"{fit.tie_ratio:.4f}x the answer's, limit {tie_limit:.2f} at "
                 f"{1e3 * depth:.0f} mm): nothing seen tells them apart"
             )
+        if fit.valley_ratio <= g.max_valley_ratio:
+            how = "better" if fit.valley_ratio < 1.0 else "almost as well"
+            raise NeedleNotFound(
+                f"a pose tilted {fit.valley_deg:.0f} deg from the answer explains the outline "
+                f"{how} (cost {fit.valley_ratio:.3f}x the answer's, limit "
+                f"{g.max_valley_ratio:.3f}): the seen part does not pin the pose's tilt"
+            )
 
     def _refit_from_own_ends(self, fit: PoseFitResult, attempt) -> PoseFitResult:
         """The cheaper of ``fit`` and a fit from its own end pixels over every depth; a refit

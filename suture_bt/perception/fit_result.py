@@ -40,6 +40,11 @@ class PoseFitResult:
     #: the answer and its base ↔ tip swap and usable under the priors, over the answer's (inf:
     #: none): near 1, a tie the image cannot break (:data:`~.rival_probe.MAX_TIE_RATIO`).
     tie_ratio: float = float("inf")
+    #: Cost of the cheapest pose at least :data:`~.valley_probe.VALLEY_DEG` from the answer
+    #: over the answer's (:mod:`valley_probe`; inf: none found or not probed), and its angle
+    #: from the answer (deg).
+    valley_ratio: float = float("inf")
+    valley_deg: float = float("nan")
     #: How far (px) the answer's end pixels in the left image lie from the nearest end
     #: hypothesis the search started from, its second search's included
     #: (:func:`~.fit_starts.ends_moved`): far, and the hypotheses were wrong, so the search may

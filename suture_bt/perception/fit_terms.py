@@ -133,6 +133,55 @@ def _nearer_end_distances(T, T_eye_left, fx, fy, cx, cy, ends, kp):
     return out
 
 
+#: The away term's residual (px) per degree short of its limit, and its column weight: steep
+#: enough that the solver's results stay within half a degree of the limit.
+AWAY_PX_PER_DEG = 0.3
+AWAY_WEIGHT = 200.0
+
+
+class AwayTerm:
+    """Residual (K, 1): AWAY_PX_PER_DEG per degree that a pose's orientation lies nearer than
+    ``min_deg`` to ``R_answer`` (0 beyond): a hinge that keeps a descent that far from an
+    answer (:mod:`~.valley_probe`). Compiled in :mod:`~.lm_step` with the same arithmetic."""
+
+    polish = True
+
+    def __init__(self, R_answer: np.ndarray, min_deg: float) -> None:
+        self.R = np.ascontiguousarray(R_answer, dtype=np.float64)
+        self.min_deg = float(min_deg)
+
+    def __bool__(self) -> bool:
+        return True
+
+    def angles_deg(self, T: np.ndarray) -> np.ndarray:
+        """Rotation angle (deg) of each pose (K, 4, 4) from ``R_answer``: from the trace of
+        Rᵀ·R_pose, summed in :func:`away_angle`'s order."""
+        trace = np.zeros(len(T))
+        for i in range(3):
+            for j in range(3):
+                trace = trace + self.R[j, i] * T[:, j, i]
+        c = np.minimum(np.maximum((trace - 1.0) / 2.0, -1.0), 1.0)
+        return np.degrees(np.arccos(c))
+
+    def __call__(self, T: np.ndarray) -> np.ndarray:
+        short = np.maximum(self.min_deg - self.angles_deg(T), 0.0)
+        return (AWAY_PX_PER_DEG * short)[:, None]
+
+    def column_weights(self, n_edge: int) -> np.ndarray:
+        return np.full(1, AWAY_WEIGHT)
+
+
+@kernel()
+def away_angle(R, T, k):
+    """:meth:`AwayTerm.angles_deg` of pose ``T[k]``, compiled."""
+    trace = 0.0
+    for i in range(3):
+        for j in range(3):
+            trace = trace + R[j, i] * T[k, j, i]
+    c = min(max((trace - 1.0) / 2.0, -1.0), 1.0)
+    return math.degrees(math.acos(c))
+
+
 def _bilinear(img: np.ndarray, u: np.ndarray, v: np.ndarray) -> np.ndarray:
     """Bilinear samples of img at (u, v); 0 outside."""
     h, w = img.shape

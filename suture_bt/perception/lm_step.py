@@ -29,13 +29,19 @@ from suture_bt.perception.arc_geometry import _arc_offsets, _ends, _place_offset
 from suture_bt.perception.compiled import kernel
 from suture_bt.perception.edge_kernel import angle_grid, edge_pose
 from suture_bt.perception.edge_residuals import N_THETA_GRID, EdgeRays
-from suture_bt.perception.fit_terms import EndPriorTerm, _nearer_end_distances
+from suture_bt.perception.fit_terms import (
+    AWAY_PX_PER_DEG,
+    AwayTerm,
+    EndPriorTerm,
+    _nearer_end_distances,
+    away_angle,
+)
 from suture_bt.perception.needle_projection import _needle_frame_basis, _poses_from_params
 from suture_bt.perception.prior_term import PRIOR_PX, HeldPlaceTerm, PriorTerm
 from suture_bt.perception.tissue_cut import grid_circle, span_derivatives, spans_of_poses
 
 #: Column blocks of the extra residuals, in the order the terms give them.
-_KEYPOINTS, _POINTS, _PLACES = 0, 1, 2
+_KEYPOINTS, _POINTS, _PLACES, _AWAY = 0, 1, 2, 3
 
 
 @kernel()
@@ -151,6 +157,12 @@ def compiled_terms(extras: list, model: NeedleModel):
             for i, a, sigma in term.places:
                 places.append((first + i, a, model.swapped_angle(a), sigma))
             blocks.append((_PLACES, start, len(term.places)))
+        elif isinstance(term, AwayTerm):
+            # Its rotation's three rows ride in the point rows, its limit in the first's
+            # tolerance: the compiled trial's arrays keep their types.
+            blocks.append((_AWAY, len(pts), 1))
+            pts.extend(term.R)
+            tols.extend([term.min_deg, 0.0, 0.0])
         else:
             return None
     n_cols = sum(n * (3 if kind == _POINTS else 1) for kind, _, n in blocks)
@@ -195,6 +207,11 @@ def _extra_residuals(T, terms, radius, tip_angle, base_angle):
                     for i in range(3):
                         E[k, col + 3 * q + i] = PRIOR_PX * (off[k, q, i] / tols[first + q])
             col += 3 * count
+        elif kind == _AWAY:
+            R = pts[first : first + 3]
+            for k in range(K):
+                E[k, col] = AWAY_PX_PER_DEG * max(tols[first] - away_angle(R, T, k), 0.0)
+            col += 1
         else:
             for j in range(first, first + count):
                 d = _place_offsets(T, pts[int(places[j, 0])], places[j, 1:3])

@@ -156,6 +156,9 @@ class PoseFitter:
     #: Whether the probed answer is also descended again from the search's wide stage
     #: (:func:`~answer_probes.wide_redescent`; a cheaper result replaces the answer).
     probe_wide: bool = True
+    #: Whether the answer's cheapest pose a few degrees away is sought (:mod:`valley_probe`;
+    #: its cost ratio is a refusal gate, ``AnswerGates.max_valley_ratio``).
+    probe_valley: bool = True
     #: The task's known tissue solid as convex pieces of world (point, outward normal) planes
     #: (:func:`~suture_bt.geometry.tissue_surface.solid_pieces`; None: unknown): the arc
     #: inside it is hidden, and the seen wire ends where it enters (:mod:`tissue_cut`).
