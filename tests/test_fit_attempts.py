@@ -89,9 +89,12 @@ def test_an_answer_with_a_close_rival_is_refused_with_its_reason(monkeypatch):
     monkeypatch.setattr(pose_fit, "RESEED_MOVED_PX", float("inf"))
     with pytest.raises(NeedleNotFound, match="explain the outline equally well"):
         _attempts(st, max_rival_ratio=0.0, **loose)(*args)
-    fit = _attempts(st, max_rival_ratio=0.0, max_tie_ratio=0.0, max_tie_ratio_far=0.0, **loose)(
-        *args
-    )
+    # Without the tie gates too, the valley gate refuses it: the rival is a pose tilted
+    # beside it at the same cost.
+    no_ties = dict(max_rival_ratio=0.0, max_tie_ratio=0.0, max_tie_ratio_far=0.0, **loose)
+    with pytest.raises(NeedleNotFound, match="a pose tilted .* explains the outline"):
+        _attempts(st, **no_ties)(*args)
+    fit = _attempts(st, max_valley_ratio=0.0, **no_ties)(*args)
     assert fit.rival_ratio <= MAX_RIVAL_RATIO and fit.tie_ratio <= MAX_TIE_RATIO
 
 

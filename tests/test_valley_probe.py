@@ -99,7 +99,7 @@ def test_session_48s_held_needle_answered_5_9_deg_off_is_refused_for_its_valley(
     assert pose_errors(fit.T_cam_needle, T)[1] > 5.0
     assert fit.valley_ratio == pytest.approx(1.017, abs=0.002)
     attempts = FitAttempts(fitter.stereo, fitter.model, None, fitter, AnswerGates())
-    with pytest.raises(NeedleNotFound, match=r"cost 1\.01.x the answer's, limit 1\.033"):
+    with pytest.raises(NeedleNotFound, match=r"cost 1\.01..x the answer's, limit 1\.033"):
         attempts._check(fit, ())
     # Without the valley gate every other gate passes it.
     loose = FitAttempts(fitter.stereo, fitter.model, None, fitter, AnswerGates(max_valley_ratio=0))

@@ -194,7 +194,7 @@ class FitAttempts:
             how = "better" if fit.valley_ratio < 1.0 else "almost as well"
             raise NeedleNotFound(
                 f"a pose tilted {fit.valley_deg:.0f} deg from the answer explains the outline "
-                f"{how} (cost {fit.valley_ratio:.3f}x the answer's, limit "
+                f"{how} (cost {fit.valley_ratio:.4f}x the answer's, limit "
                 f"{g.max_valley_ratio:.3f}): the seen part does not pin the pose's tilt"
             )
 
