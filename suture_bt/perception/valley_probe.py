@@ -22,8 +22,9 @@ benchmark's 5 deg), and the localiser refuses it (MAX_VALLEY_RATIO).
 
 Development figures (session 51; the frames of seeds 17239218, 38018832, 78467446 #0-#50 and
 81636479 #0-#69 ``occluded``, and six wrong answers of sessions 46-48's reports rendered
-again): over 468 right answers the lowest ratio was 1.0354 (78467446 ``occluded`` #6), and
-the wrong answers scored 1.017, 1.0006 and 1.030 (session 48's three), 1.031 (33854898
+again): over 468 right answers the lowest ratio was 1.0354 (78467446 ``occluded`` #6; a
+test's scene, 11493571 ``occluded`` #123, is a right answer at 1.031, refused as a far tie
+anyway), and the wrong answers scored 1.017, 1.0006 and 1.030 (session 48's three), 1.031 (33854898
 ``in_port`` #16 with priors, a loose view), 0.779 (31964343 ``occluded`` #85: a pose 5 deg
 away cheaper than the answer) and 0.990 (79669171 ``held_start`` #19, held-out phantom).
 Not caught: loose ``in_port`` views with priors 5.2-5.8 deg off (1.047-1.088), a free needle
