@@ -25,7 +25,7 @@ def test_the_true_pose_of_an_exact_outline_is_answered_with_tight_evidence():
     cf = np.array([5.0, 1.0])
     ok, near = np.array([True, True]), np.array([True, True])
     search.tried.append(tuple(end_pixels(cam, T, MODEL)))
-    res = answer_result(search, xf, cf, (1, ok, None, near), None, 4.0)
+    res = answer_result(search, xf, cf, (1, ok, None, near), [], 4.0)
     np.testing.assert_allclose(res.T_cam_needle, T, atol=1e-9)
     np.testing.assert_allclose(res.T_world_needle, cam.T_world_cam @ res.T_cam_needle)
     np.testing.assert_array_equal(res.params, xf[1])

@@ -4,6 +4,7 @@ edge ray (residual, inliers, spread, rival, tie, how far its ends moved). Split 
 
 from __future__ import annotations
 
+from collections.abc import Sequence
 from typing import TYPE_CHECKING
 
 import numpy as np
@@ -26,14 +27,15 @@ def answer_result(
     xf: np.ndarray,
     cf: np.ndarray,
     choice: tuple,
-    prior_term: PriorTerm | None,
+    polish: Sequence,
     ambiguity: float,
 ) -> PoseFitResult:
     """The fit's result when it answers row ``b`` of its polished and probed candidates
     ``xf`` (costs ``cf``). ``search`` is the fit's :class:`~.fit_search.StartSearch` (its
     fitter, edge rays and the end hypotheses it started from); ``choice`` is (b, which rows
     the priors allow, their misses or None, which rows are near enough to be rivals),
-    ``prior_term`` the polish's prior term (or None), ``ambiguity`` the polish's cost gap."""
+    ``polish`` the polish's terms (its prior term among them, if any), ``ambiguity`` the
+    polish's cost gap."""
     fitter, rays = search.fitter, search.rays
     b, ok, misses, near = choice
     cam, model = fitter.stereo.left, fitter.model
@@ -45,12 +47,13 @@ def answer_result(
     r = r[0]
     inl = np.abs(r) < 1.5
     rms = float(np.sqrt(np.mean(r[inl] ** 2))) if inl.any() else float("inf")
+    # The polish's own prior term (HeldPlaceTerm, a subclass, is the search's).
+    prior_term = next((t for t in polish if type(t) is PriorTerm), None)
     ang_std, pos_std = pose_uncertainty(
         xf[b], rays, fitter.stereo, model, 1.0, fitter.final_loss, prior_term
     )
     valley, valley_deg = float("inf"), float("nan")
     if fitter.probe_valley:
-        polish = [t for t in search.terms if t.polish] + ([prior_term] if prior_term else [])
         fit_rays = FitRays(rays, search.coarse, search.mid)
         valley, valley_deg = valley_ratio(
             xf[b], float(cf[b]), fit_rays, fitter.stereo, model, polish, fitter.final_loss

@@ -142,9 +142,8 @@ AWAY_WEIGHT = 200.0
 class AwayTerm:
     """Residual (K, 1): AWAY_PX_PER_DEG per degree that a pose's orientation lies nearer than
     ``min_deg`` to ``R_answer`` (0 beyond): a hinge that keeps a descent that far from an
-    answer (:mod:`~.valley_probe`). Compiled in :mod:`~.lm_step` with the same arithmetic."""
-
-    polish = True
+    answer (:mod:`~.valley_probe`). Compiled in :mod:`~.lm_step` with the same arithmetic.
+    Never one of a fit's own terms: the probe passes it to the solver beside the polish's."""
 
     def __init__(self, R_answer: np.ndarray, min_deg: float) -> None:
         self.R = np.ascontiguousarray(R_answer, dtype=np.float64)

@@ -267,7 +267,7 @@ class PoseFitter:
         xf, cf, b, ok, misses, near = probed(
             self, xf, cf, (b, ok, misses), FitRays(rays, coarse, mid), polish, priors, hidden_end
         )
-        return answer_result(search, xf, cf, (b, ok, misses, near), prior_term, amb)
+        return answer_result(search, xf, cf, (b, ok, misses, near), polish, amb)
 
     def tissue_cut(self, priors: Sequence[NeedlePrior] = ()) -> TissueCut:
         """Where the tissue hides the arc for a fit with these priors: the known solid (if
