@@ -24,7 +24,9 @@ def default_blueprint() -> rrb.Blueprint:
     lanes = rrb.StateTimelineView(name="node status", origin="/bt/nodes")
     text = rrb.Tabs(
         rrb.TextDocumentView(name="tree", origin="/bt/tree"),
-        rrb.TextLogView(name="log", origin="/bt", contents=["+ /bt/log", "+ /bt/checks"]),
+        rrb.TextLogView(
+            name="log", origin="/bt", contents=["+ /bt/log", "+ /bt/checks", "+ /bt/refusals"]
+        ),
         rrb.TextLogView(name="blackboard", origin="/bt/blackboard"),
         rrb.TextLogView(name="ground truth log", origin="/ground_truth/log"),
         rrb.TextDocumentView(name="run", origin="/run"),

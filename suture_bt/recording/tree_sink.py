@@ -4,8 +4,10 @@ Entities: ``run/info`` (options, oracle label), ``run/nodes`` (path, name, class
 node, JSON), ``run/tree`` (the tree before the first tick), ``run/result`` (the result at the
 end); ``bt/nodes/<path>`` (a StateChange lane per node), ``bt/tree`` (py_trees' unicode tree
 whenever it changes), ``bt/log`` (skills starting and ending, every FAILURE with its reason;
-``node_path`` beside), ``bt/checks`` (the skills' confirmations) and ``bt/blackboard`` (the
-activity stream, READs at TRACE).
+``node_path`` beside), ``bt/checks`` (the skills' confirmations), ``bt/refusals`` (every look
+the needle sensor or localiser refused, with its reason: a skill that looked again and went
+on leaves no FAILURE behind, so the reason would be lost) and ``bt/blackboard`` (the activity
+stream, READs at TRACE).
 """
 
 from __future__ import annotations
@@ -54,6 +56,15 @@ def all_checks(report: dict) -> list[dict]:
     return out
 
 
+def all_refusals(report: dict) -> list[list[str]]:
+    """A report's refusal lists (``refusals``: each refused look's reason) and those of its
+    finished sub-skills (``steps``), in order."""
+    out = [report["refusals"]] if isinstance(report.get("refusals"), list) else []
+    for step in report.get("steps", []):
+        out += all_refusals(step)
+    return out
+
+
 class TreeSink(Sink):
     """Log the tree's ticks to ``rec`` (see the module docstring)."""
 
@@ -61,6 +72,7 @@ class TreeSink(Sink):
         self.rec = rec
         self._tree_text = ""
         self._seen: dict[int, Any] = {}  # id -> check already logged (kept: ids stay unique)
+        self._refused: dict[int, tuple[list, int]] = {}  # id -> (refusal list, entries logged)
 
     def start(self, session: Any) -> None:
         rec, opts = self.rec, session.options
@@ -143,6 +155,19 @@ class TreeSink(Sink):
                     ),
                     rr.AnyValues(node_path=session.observer.paths[node.id]),
                 )
+            self._log_refusals(node, session.observer.paths[node.id])
+
+    def _log_refusals(self, node: Any, path: str) -> None:
+        """The refusals ``node``'s skill recorded since the last tick (``bt/refusals``)."""
+        for reasons in all_refusals(node.skill.report):
+            _, done = self._refused.get(id(reasons), (reasons, 0))
+            for reason in reasons[done:]:
+                self.rec.log(
+                    "bt/refusals",
+                    rr.TextLog(f"{node.name}: refused: {reason}", level=rr.TextLogLevel.WARN),
+                    rr.AnyValues(node_path=path),
+                )
+            self._refused[id(reasons)] = (reasons, len(reasons))
 
     def error(self, session: Any, message: str) -> None:
         set_time(self.rec, session.ticks + 1, session.context.clock.now())
