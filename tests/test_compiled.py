@@ -17,6 +17,7 @@ from numba.core.registry import CPUDispatcher
 
 import suture_bt.perception as perception
 from suture_bt.perception.compiled import ERROR_MODEL, kernel
+from suture_bt.perception.kernel_cache import PackageStampedCache
 
 
 def _weight(r, s):
@@ -86,7 +87,7 @@ def test_every_compiled_kernel_of_the_localiser_states_its_flags_and_is_cached()
         options = d.targetoptions
         assert options.get("error_model") == ERROR_MODEL, name
         assert "fastmath" in options, name
-        assert type(d._cache).__name__ == "FunctionCache", name  # cached on disk
+        assert isinstance(d._cache, PackageStampedCache), name  # cached on disk, stamped
 
 
 _CHILD = """

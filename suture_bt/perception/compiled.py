@@ -25,6 +25,8 @@ from collections.abc import Callable, Set
 
 from numba import njit
 
+from suture_bt.perception.kernel_cache import cache_by_package
+
 #: numba's error model for every kernel: what its parallel loop bodies use anyway (NaN or inf
 #: from a division by zero, no check), so a kernel is the same code wherever it is called.
 ERROR_MODEL = "numpy"
@@ -38,6 +40,8 @@ def kernel(
     cache: bool = True,
 ) -> Callable:
     """``numba.njit`` with the error model and fastmath stated (never inherited) and, by
-    default, the on-disk cache on."""
+    default, the on-disk cache on, stamped by every source of the package
+    (:mod:`~.kernel_cache`: numba's own stamp misses a change in a callee's file)."""
     fm = set(fastmath) if isinstance(fastmath, Set) else bool(fastmath)
-    return njit(cache=cache, parallel=parallel, fastmath=fm, error_model=ERROR_MODEL, inline=inline)
+    jit = njit(parallel=parallel, fastmath=fm, error_model=ERROR_MODEL, inline=inline)
+    return (lambda fn: cache_by_package(jit(fn))) if cache else jit
