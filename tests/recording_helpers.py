@@ -94,3 +94,28 @@ def fake_session() -> FakeSession:
         children=[Scripted("Approach", [R, S]), Scripted("Insert pair 1", [R, R, F], "jaw empty")],
     )
     return FakeSession(root)
+
+
+class Looking(py_trees.behaviour.Behaviour):
+    """A skill's behaviour whose looks are refused on ticks 1 and 3 (in a finished sub-skill's
+    report on tick 3), then found on tick 4."""
+
+    def __init__(self):
+        super().__init__("Localize needle")
+        self.skill = SimpleNamespace(report={"checks": []})
+        self.n = 0
+
+    def update(self):
+        self.n += 1
+        report = self.skill.report
+        if self.n == 1:
+            report.setdefault("refusals", []).append("needle out of view")
+        if self.n == 3:
+            report["steps"] = [{"checks": [], "refusals": ["two views disagree: 4 mm"]}]
+            report["refusals"].append("valley 1.01x")
+        return Status.SUCCESS if self.n == 4 else Status.RUNNING
+
+
+def looking_session() -> FakeSession:
+    """Root sequence of one :class:`Looking` skill: refused looks on ticks 1 and 3, found on 4."""
+    return FakeSession(py_trees.composites.Sequence("Root", memory=True, children=[Looking()]))

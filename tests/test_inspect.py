@@ -1,8 +1,8 @@
 """``suture-bt inspect`` and ``replay``: a saved run as text with no viewer; a scripted
-failure with its reason and tick; bad input as one line and a non-zero exit."""
+failure with its reason and tick; refused looks; bad input as one line and a non-zero exit."""
 
 import rerun as rr
-from recording_helpers import fake_session, recorded_run
+from recording_helpers import fake_session, looking_session, recorded_run
 
 from suture_bt.cli import main
 from suture_bt.recording.tree_sink import Flush, TreeSink
@@ -45,6 +45,22 @@ def test_inspect_shows_each_failure_with_its_reason_and_tick(tmp_path, capsys):
     assert "ticks: 1..4" in out.out
     assert "tick 4 (0.06 s) Insert pair 1 FAILED: jaw empty  [Root/Insert_pair_1]" in out.out
     assert "result: none recorded" in out.out
+
+
+def test_inspect_lists_refused_looks_with_their_reasons(tmp_path, capsys):
+    session = looking_session()
+    rec = rr.RecordingStream("suture-bt-test", recording_id="looking")
+    rec.save(tmp_path / "x.rrd")
+    for sink in (TreeSink(rec), Flush(rec)):
+        session.observer.add(sink)
+    while not session.finished:
+        session.tick()
+    session.observer.close()
+    code, out = _inspect(capsys, tmp_path / "x.rrd")
+    assert code == 0 and "refused looks (3):" in out.out
+    assert "tick 1 (0.00 s) Localize needle: refused: needle out of view" in out.out
+    code, out = _inspect(capsys, tmp_path / "x.rrd", "--node", "Localize needle")
+    assert code == 0 and "[WARN] Localize needle: refused: valley 1.01x" in out.out
 
 
 def test_bad_recordings_are_one_line_and_nonzero(tmp_path, capsys, monkeypatch):

@@ -4,12 +4,9 @@ the spawn fallback without a viewer; a scripted tree's failure with its reason a
 refused looks."""
 
 import json
-from types import SimpleNamespace
 
-import py_trees
 import rerun as rr
-from py_trees.common import Status
-from recording_helpers import FakeSession, fake_session, recorded_run
+from recording_helpers import fake_session, looking_session, recorded_run
 from rerun.chunk import RrdReader
 
 from suture_bt.recording.reader import read_run
@@ -119,29 +116,8 @@ def test_tree_sink_logs_a_failure_with_its_reason_and_node(tmp_path):
     assert "Root [✕]" in run.tree_at(4).text
 
 
-class _Looking(py_trees.behaviour.Behaviour):
-    """A skill's behaviour whose looks are refused on ticks 1 and 3 (in a finished sub-skill's
-    report on tick 3), then found on tick 4."""
-
-    def __init__(self):
-        super().__init__("Localize needle")
-        self.skill = SimpleNamespace(report={"checks": []})
-        self.n = 0
-
-    def update(self):
-        self.n += 1
-        report = self.skill.report
-        if self.n == 1:
-            report.setdefault("refusals", []).append("needle out of view")
-        if self.n == 3:
-            report["steps"] = [{"checks": [], "refusals": ["two views disagree: 4 mm"]}]
-            report["refusals"].append("valley 1.01x")
-        return Status.SUCCESS if self.n == 4 else Status.RUNNING
-
-
 def test_tree_sink_logs_each_refused_look_once_with_its_node(tmp_path):
-    root = py_trees.composites.Sequence("Root", memory=True, children=[_Looking()])
-    session = FakeSession(root)
+    session = looking_session()
     rec = rr.RecordingStream("suture-bt-test", recording_id="refusals")
     rec.save(tmp_path / "x.rrd")
     for sink in (TreeSink(rec), Flush(rec)):

@@ -96,7 +96,11 @@ def run(args) -> int:
             print(f"\n{n['name']}  [{n['class']}]  {n['path']}")
             for e in rec.lanes.get(n["path"], []):
                 print(f"  {_when(e)} {e.text}")
-            for e in rec.logs.get("bt/log", []) + rec.logs.get("bt/checks", []):
+            for e in (
+                rec.logs.get("bt/log", [])
+                + rec.logs.get("bt/checks", [])
+                + rec.logs.get("bt/refusals", [])
+            ):
                 if e.node_path == n["path"]:
                     print(f"  {_when(e)} [{e.level}] {e.text}")
         return 0
@@ -111,9 +115,13 @@ def run(args) -> int:
     print(f"\nfailed checks ({len(failed_checks)}):")
     for e in failed_checks:
         print(f"  {_when(e)} {e.text}")
+    refused = rec.logs.get("bt/refusals", [])
+    print(f"\nrefused looks ({len(refused)}):")
+    for e in refused:
+        print(f"  {_when(e)} {e.text}")
     if args.log:
         print("\nlog:")
-        for name in ("bt/log", "bt/checks", "ground_truth/log"):
+        for name in ("bt/log", "bt/checks", "bt/refusals", "ground_truth/log"):
             for e in rec.logs.get(name, []):
                 if e.level not in ("DEBUG", "TRACE"):
                     print(f"  {_when(e)} [{e.level}] {e.text}")

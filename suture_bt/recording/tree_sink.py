@@ -4,10 +4,11 @@ Entities: ``run/info`` (options, oracle label), ``run/nodes`` (path, name, class
 node, JSON), ``run/tree`` (the tree before the first tick), ``run/result`` (the result at the
 end); ``bt/nodes/<path>`` (a StateChange lane per node), ``bt/tree`` (py_trees' unicode tree
 whenever it changes), ``bt/log`` (skills starting and ending, every FAILURE with its reason;
-``node_path`` beside), ``bt/checks`` (the skills' confirmations), ``bt/refusals`` (every look
-the needle sensor or localiser refused, with its reason: a skill that looked again and went
-on leaves no FAILURE behind, so the reason would be lost) and ``bt/blackboard`` (the activity
-stream, READs at TRACE).
+``node_path`` beside), ``bt/checks`` (the skills' confirmations), ``bt/refusals`` (the skills'
+``refusals``: every look the needle sensor or localiser refused, with its reason, and where a
+skill ran a localisation step that failed, that step's reason, which quotes its looks'; a
+skill that looked again and went on leaves no FAILURE behind, so the reason would be lost)
+and ``bt/blackboard`` (the activity stream, READs at TRACE).
 """
 
 from __future__ import annotations
