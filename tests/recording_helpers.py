@@ -119,3 +119,22 @@ class Looking(py_trees.behaviour.Behaviour):
 def looking_session() -> FakeSession:
     """Root sequence of one :class:`Looking` skill: refused looks on ticks 1 and 3, found on 4."""
     return FakeSession(py_trees.composites.Sequence("Root", memory=True, children=[Looking()]))
+
+
+def record_scripted(session: FakeSession, path: Path, result: dict | None = None) -> Path:
+    """Tick a scripted ``session`` to its end with the tree sink saving to ``path`` (an .rrd),
+    then finish it with ``result`` (if given) and close it; ``path``."""
+    import rerun as rr
+
+    from suture_bt.recording.tree_sink import Flush, TreeSink
+
+    rec = rr.RecordingStream("suture-bt-test", recording_id=path.stem)
+    rec.save(path)
+    for sink in (TreeSink(rec), Flush(rec)):
+        session.observer.add(sink)
+    while not session.finished:
+        session.tick()
+    if result is not None:
+        session.observer.finish(result)
+    session.observer.close()
+    return path

@@ -1,11 +1,9 @@
 """``suture-bt inspect`` and ``replay``: a saved run as text with no viewer; a scripted
 failure with its reason and tick; refused looks; bad input as one line and a non-zero exit."""
 
-import rerun as rr
-from recording_helpers import fake_session, looking_session, recorded_run
+from recording_helpers import fake_session, looking_session, record_scripted, recorded_run
 
 from suture_bt.cli import main
-from suture_bt.recording.tree_sink import Flush, TreeSink
 
 
 def _inspect(capsys, *args):
@@ -33,13 +31,7 @@ def test_inspect_a_saved_run(capsys):
 
 def test_inspect_shows_each_failure_with_its_reason_and_tick(tmp_path, capsys):
     session = fake_session()
-    rec = rr.RecordingStream("suture-bt-test", recording_id="scripted")
-    rec.save(tmp_path / "x.rrd")
-    for sink in (TreeSink(rec), Flush(rec)):
-        session.observer.add(sink)
-    while not session.finished:
-        session.tick()
-    session.observer.close()
+    record_scripted(session, tmp_path / "x.rrd")
     code, out = _inspect(capsys, tmp_path / "x.rrd")
     assert code == 0
     assert "ticks: 1..4" in out.out
@@ -49,13 +41,7 @@ def test_inspect_shows_each_failure_with_its_reason_and_tick(tmp_path, capsys):
 
 def test_inspect_lists_refused_looks_with_their_reasons(tmp_path, capsys):
     session = looking_session()
-    rec = rr.RecordingStream("suture-bt-test", recording_id="looking")
-    rec.save(tmp_path / "x.rrd")
-    for sink in (TreeSink(rec), Flush(rec)):
-        session.observer.add(sink)
-    while not session.finished:
-        session.tick()
-    session.observer.close()
+    record_scripted(session, tmp_path / "x.rrd")
     code, out = _inspect(capsys, tmp_path / "x.rrd")
     assert code == 0 and "refused looks (3):" in out.out
     assert "tick 1 (0.00 s) Localize needle: refused: needle out of view" in out.out

@@ -5,12 +5,10 @@ refused looks."""
 
 import json
 
-import rerun as rr
-from recording_helpers import fake_session, looking_session, recorded_run
+from recording_helpers import fake_session, looking_session, record_scripted, recorded_run
 from rerun.chunk import RrdReader
 
 from suture_bt.recording.reader import read_run
-from suture_bt.recording.tree_sink import Flush, TreeSink
 
 
 def _ranges(path):
@@ -96,14 +94,9 @@ def test_spawn_without_a_viewer_saves_and_says_so(tmp_path, monkeypatch):
 
 def test_tree_sink_logs_a_failure_with_its_reason_and_node(tmp_path):
     session = fake_session()
-    rec = rr.RecordingStream("suture-bt-test", recording_id="scripted")
-    rec.save(tmp_path / "x.rrd")
-    for sink in (TreeSink(rec), Flush(rec)):
-        session.observer.add(sink)
-    while not session.finished:
-        session.tick()
-    session.observer.finish({"passed": False, "tree_status": "FAILURE", "ports": {}})
-    session.observer.close()
+    record_scripted(
+        session, tmp_path / "x.rrd", {"passed": False, "tree_status": "FAILURE", "ports": {}}
+    )
     run = read_run(tmp_path / "x.rrd")
     assert [n["name"] for n in run.nodes] == ["Root", "Approach", "Insert pair 1"]
     assert [(e.tick, e.text) for e in run.lanes["Root/Insert_pair_1"]] == [
@@ -118,14 +111,9 @@ def test_tree_sink_logs_a_failure_with_its_reason_and_node(tmp_path):
 
 def test_tree_sink_logs_each_refused_look_once_with_its_node(tmp_path):
     session = looking_session()
-    rec = rr.RecordingStream("suture-bt-test", recording_id="refusals")
-    rec.save(tmp_path / "x.rrd")
-    for sink in (TreeSink(rec), Flush(rec)):
-        session.observer.add(sink)
-    while not session.finished:
-        session.tick()
-    session.observer.finish({"passed": True, "tree_status": "SUCCESS", "ports": {}})
-    session.observer.close()
+    record_scripted(
+        session, tmp_path / "x.rrd", {"passed": True, "tree_status": "SUCCESS", "ports": {}}
+    )
     logged = [
         (e.tick, e.text, e.level, e.node_path)
         for e in read_run(tmp_path / "x.rrd").logs["bt/refusals"]

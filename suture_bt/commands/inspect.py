@@ -10,6 +10,9 @@ from __future__ import annotations
 
 from pathlib import Path
 
+#: The tree's text logs, in the order a node's entries and ``--log`` list them.
+TREE_LOGS = ("bt/log", "bt/checks", "bt/refusals")
+
 
 def register(subparsers) -> None:
     p = subparsers.add_parser("inspect", help="print what a saved run.rrd did (no viewer)")
@@ -96,11 +99,7 @@ def run(args) -> int:
             print(f"\n{n['name']}  [{n['class']}]  {n['path']}")
             for e in rec.lanes.get(n["path"], []):
                 print(f"  {_when(e)} {e.text}")
-            for e in (
-                rec.logs.get("bt/log", [])
-                + rec.logs.get("bt/checks", [])
-                + rec.logs.get("bt/refusals", [])
-            ):
+            for e in (e for name in TREE_LOGS for e in rec.logs.get(name, [])):
                 if e.node_path == n["path"]:
                     print(f"  {_when(e)} [{e.level}] {e.text}")
         return 0
@@ -121,7 +120,7 @@ def run(args) -> int:
         print(f"  {_when(e)} {e.text}")
     if args.log:
         print("\nlog:")
-        for name in ("bt/log", "bt/checks", "bt/refusals", "ground_truth/log"):
+        for name in (*TREE_LOGS, "ground_truth/log"):
             for e in rec.logs.get(name, []):
                 if e.level not in ("DEBUG", "TRACE"):
                     print(f"  {_when(e)} [{e.level}] {e.text}")
