@@ -141,13 +141,43 @@ def test_a_piece_hides_only_a_stretch_of_arc_that_reaches_its_depth():
     assert np.isfinite(spans(0.0025, 0.001)[0]).all()
 
 
-def test_span_derivatives_are_those_of_the_plane_roots_and_an_arc_end_does_not_move():
+def _entry_plane(crossing: float, entry_deg: float):
+    """A surface plane the arc enters at ``crossing`` at ``entry_deg`` (its normal tilted out
+    of the needle's plane: the circle crosses it at ``crossing`` only, within the arc),
+    the tissue on the base's side."""
+    phi = np.radians(entry_deg)
+    point, _ = _plane_at(crossing, towards_tip=True)
+    normal = -np.sin(phi) * _tangent(crossing) + np.cos(phi) * np.array([0.0, 0.0, 1.0])
+    return point, T0[:3, :3] @ normal
+
+
+def test_a_shallow_entry_s_cut_reaches_past_the_plane_as_the_wire_s_top_does():
+    """Entering at 30° the wire's top shows r·cot 30° past the centre-line's crossing: the
+    cut's seen end moves (1.4 - cot 30°) wire radii past the plane, not one radius short of
+    it as at a steep entry (≥ 68°, cot ≤ 0.4); 10° counts as 18° (cot 3)."""
+    crossing = np.radians(100.0)
+    for entry_deg, reach in ((90.0, -1.0), (70.0, -1.0), (30.0, 1 / np.tan(np.radians(30.0)) - 1.4),
+                             (10.0, 3.0 - 1.4)):  # fmt: skip
+        cut = TissueCut.from_ports([_entry_plane(crossing, entry_deg)], np.eye(4), MODEL)
+        spans = cut.spans(T0[None])[0]
+        np.testing.assert_allclose(spans[0], [crossing + reach * SHIFT, HI], atol=1e-9)
+
+
+def test_a_dip_shallower_than_the_wire_s_taper_is_not_cut():
+    """A plane 0.01 mm under the arc's top point: the centre-line dips under it for 5° of arc,
+    whose ends, each set 1.6 wire radii past the plane by the shallow entries (counted as
+    18°), cross: nothing is hidden (a piece asking no depth)."""
+    top = np.radians(90.0)
+    point = T0[:3, :3] @ MODEL.point_at(top) + T0[:3, 3]
+    up = T0[:3, :3] @ np.array([0.0, -1.0, 0.0])
+    piece = [(point + 0.00001 * up, up)]
+    assert np.isnan(TissueCut.from_pieces([piece], np.eye(4), MODEL, [0.0]).spans(T0[None])).all()
+
+
+def _check_span_derivatives(plane) -> None:
     """The analytic derivatives of the span ends agree with finite differences of the spans
     over small turns and shifts of the pose; the end at the arc's base stays put."""
-    crossing = np.radians(100.0)
-    tilted = np.array([0.3, -0.2, 1.0]) / np.linalg.norm([0.3, -0.2, 1.0])
-    point, _ = _plane_at(crossing, towards_tip=True)
-    cut = TissueCut.from_ports([(point, -_tangent(crossing) + 0.3 * tilted)], np.eye(4), MODEL)
+    cut = TissueCut.from_ports([plane], np.eye(4), MODEL)
     steps = np.array([1e-6, 1e-6, 1e-6, 1e-5, 1e-5, 1e-5])
     moves = []
     for i, h in enumerate(steps):
@@ -162,6 +192,19 @@ def test_span_derivatives_are_those_of_the_plane_roots_and_an_arc_end_does_not_m
     np.testing.assert_allclose(deriv[0, :, 0, 0], fd[:, 0, 0], rtol=1e-3, atol=1e-3)
     assert np.all(deriv[0, :, 0, 1] == 0.0)  # the base end of the arc
     assert np.abs(deriv[0, :, 0, 0]).max() > 1.0  # the cut's end does move
+
+
+def test_span_derivatives_are_those_of_the_plane_roots_and_an_arc_end_does_not_move():
+    """A steep, tilted plane: the cut's end is the root set back by the wire's radius."""
+    crossing = np.radians(100.0)
+    tilted = np.array([0.3, -0.2, 1.0]) / np.linalg.norm([0.3, -0.2, 1.0])
+    point, _ = _plane_at(crossing, towards_tip=True)
+    _check_span_derivatives((point, -_tangent(crossing) + 0.3 * tilted))
+
+
+def test_span_derivatives_follow_the_entry_angle_of_a_shallow_entry():
+    """Entering at 35° the set-back moves with the entry angle too (its own derivative)."""
+    _check_span_derivatives(_entry_plane(np.radians(100.0), 35.0))
 
 
 def _small_rotation(w: np.ndarray) -> np.ndarray:

