@@ -4,8 +4,8 @@ One single-threaded loop (DESIGN.md §4): :meth:`World.step` advances simulated 
 physics ticks of 1/rate (1 kHz by default). In every tick, in this order: the periodic
 callbacks due at that tick (registration order), the arms' trajectories/servos/jaws, grasp and
 release, the pybullet step (free needle dynamics), the kinematic reset of the arm links and of
-a held needle, and the phantom's crossing/strain and tissue-entry bookkeeping. Same scene +
-seed ⇒ same run.
+a held needle, and the phantom's crossing/strain and tissue-entry bookkeeping (fed by
+:class:`~suture_bt.sim.needle_watch.NeedleWatch`). Same scene + seed ⇒ same run.
 
 What skills may see is :attr:`World.task` (the known phantom and needle models), the arms
 (``psm1``, ``psm2``) and the camera. Ground truth lives in ``suture_bt.sim.ground_truth``.
@@ -31,13 +31,14 @@ from suture_bt.sim.grasp import GraspCheck, check_grasp
 from suture_bt.sim.joint_offsets import JointOffset
 from suture_bt.sim.joint_servo import JointServo, ServoParams
 from suture_bt.sim.needle_body import NeedleBody
+from suture_bt.sim.needle_watch import NeedleWatch
 from suture_bt.sim.phantom_body import PhantomBody
 from suture_bt.sim.psm_body import LINK_JAWS, LINK_TIP, PSMBody
 from suture_bt.sim.quiet import quiet_fd
 from suture_bt.sim.rendering import load_renderer
 from suture_bt.sim.scene import SceneConfig, default_scene
 from suture_bt.sim.simulated_psm import SimulatedPSM
-from suture_bt.transforms import invert, make_transform, matrix_from_quat_xyzw, pose_to_transform
+from suture_bt.transforms import invert, make_transform, pose_to_transform
 
 #: SRC base (RCM) poses of the two arms in the world (DESIGN.md §5).
 PSM_BASE_POSES = {
@@ -47,11 +48,6 @@ PSM_BASE_POSES = {
 GRAVITY = (0.0, 0.0, -9.81)
 #: SRC initial needle pose, resting on the tissue, in the phantom frame (DESIGN.md §5).
 SRC_NEEDLE_REST_POSITION = (-0.0208, 0.0562, 0.0717)
-#: The phantom's crossing/strain bookkeeping runs while the needle's centre of mass is within
-#: this distance of a port: every centre-line point is within 9.6 mm of the centre of mass, and
-#: crossings are captured within 10 mm of a port (engagement within 5 mm), plus a 7 mm margin;
-#: farther away nothing can cross or engage.
-PORT_WATCH_RADIUS = 0.027
 #: The needle/phantom bookkeeping (held needle snapped onto its jaw, port crossings, strain)
 #: runs every this many physics ticks (250 Hz) and at the end of every ``step``: crossing
 #: times are interpolated between updates, and the tip moves ~µm per tick, so nothing is lost,
@@ -194,22 +190,9 @@ class World:
         elif self.phantom.inserted(T_needle):
             # A needle that starts stuck in the tissue is held there.
             self.needle.freeze(T_needle)
-        self._port_positions = np.array([p.position for p in self.task.phantom.ports()])
-        self._phantom_tracking = False
-        self._last_needle_state: np.ndarray | None = None
-        if self._needle_near_ports()[0]:
-            self.phantom.update(self.needle.pose(), 0.0)
-            self._phantom_tracking = True
-        # Tissue entries: the tip in the needle body's base (COM) frame, so the tip follows from
-        # the base state read anyway; the first sample records nothing (a tip that starts
-        # inside the tissue is no entry).
-        state = self._last_needle_state
-        T_world_com = make_transform(matrix_from_quat_xyzw(state[3:]), state[:3])
-        T_com_needle = invert(T_world_com) @ self.needle.pose()
-        self._tip_in_com = tuple(
-            float(v) for v in T_com_needle[:3, :3] @ self.task.needle.tip + T_com_needle[:3, 3]
-        )
-        self.phantom.track_tip(self._needle_tip(), 0.0)
+        # The phantom's bookkeeping (crossings, strain, tissue entries), fed from the needle.
+        self._watch = NeedleWatch(self.client, self.task.phantom, self.task.needle)
+        self._watch.start(self.needle, self.phantom)
 
     def _needle_start_pose(self) -> np.ndarray:
         """World pose of the needle at start, per the scene."""
@@ -370,51 +353,14 @@ class World:
         return result.T_tip_needle if result.ok else None
 
     def _after_physics(self, t: float) -> None:
-        """Held needle snaps onto its jaw; the phantom records crossings and strain.
+        """Held needle snaps onto its jaw; the phantom records crossings, strain and entries.
 
         Runs every ``BOOKKEEPING_TICKS`` physics ticks and at the end of every :meth:`step`
         (between, the grasp constraint carries a held needle within ~0.1 mm of its jaw).
         """
         if self.needle is not None:
             self.needle.update()  # a held needle snaps exactly onto its jaw
-            if self.needle.frozen:
-                self.phantom.track_tip(None, t)  # the tissue holds it: the tip stays put
-                return
-            near, moved = self._needle_near_ports()
-            # Tissue entries anywhere on the phantom (a few µs, only when the needle moved).
-            self.phantom.track_tip(self._needle_tip() if moved else None, t)
-            if near and (moved or not self._phantom_tracking):
-                self.phantom.update(self.needle.pose(), t)
-                self._phantom_tracking = True
-            elif not near and self._phantom_tracking:
-                # Far from every port nothing can cross or engage; start afresh when back.
-                self.phantom.reset_tracking()
-                self.phantom.strain = {}
-                self._phantom_tracking = False
-
-    def _needle_near_ports(self) -> tuple[bool, bool]:
-        """(near, moved): whether the needle is close enough to a port to cross or strain it,
-        and whether it moved since the last call (a needle at rest changes no record)."""
-        com, quat = pb.getBasePositionAndOrientation(self.needle.id, physicsClientId=self.client)
-        state = np.r_[com, quat]
-        moved = self._last_needle_state is None or bool(
-            np.abs(state - self._last_needle_state).max() > 1e-9
-        )
-        self._last_needle_state = state
-        d2 = np.sum((self._port_positions - state[:3]) ** 2, axis=1)
-        return bool(d2.min() < PORT_WATCH_RADIUS**2), moved
-
-    def _needle_tip(self) -> tuple[float, float, float]:
-        """World needle tip from the base state of the last :meth:`_needle_near_ports` call
-        (quaternion rotation in plain Python: no matrix per bookkeeping update)."""
-        px, py, pz, qx, qy, qz, qw = self._last_needle_state.tolist()
-        vx, vy, vz = self._tip_in_com
-        tx, ty, tz = 2 * (qy * vz - qz * vy), 2 * (qz * vx - qx * vz), 2 * (qx * vy - qy * vx)
-        return (
-            px + vx + qw * tx + qy * tz - qz * ty,
-            py + vy + qw * ty + qz * tx - qx * tz,
-            pz + vz + qw * tz + qx * ty - qy * tx,
-        )
+            self._watch.update(self.needle, self.phantom, t)
 
     # ------------------------------------------------------------------ helpers
     def segmentation_masks(self, eye: str = "left") -> dict[str, np.ndarray]:

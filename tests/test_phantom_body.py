@@ -8,7 +8,8 @@ from suture_bt.geometry.needle import NeedleModel
 from suture_bt.geometry.phantom import TISSUE_TOP_Z, PhantomModel
 from suture_bt.sim.camera import StereoEndoscope
 from suture_bt.sim.needle_body import NeedleBody
-from suture_bt.sim.phantom_body import FLOOR_DEPTH, FLOOR_HALF_THICKNESS, PhantomBody
+from suture_bt.sim.phantom_body import PhantomBody
+from suture_bt.sim.phantom_build import FLOOR_DEPTH, FLOOR_HALF_THICKNESS
 from suture_bt.transforms import make_transform, pose_to_transform
 
 MODEL = NeedleModel()

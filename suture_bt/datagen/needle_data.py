@@ -212,7 +212,7 @@ class SimScene:
 
     def __init__(self, width: int, height: int, seed: int = 0) -> None:
         from suture_bt.sim.camera import render_view, stereo_model
-        from suture_bt.sim.phantom_body import BLOCK_X, BLOCK_Y
+        from suture_bt.sim.phantom_build import BLOCK_X, BLOCK_Y
         from suture_bt.sim.scene import default_scene
         from suture_bt.sim.world import World, psm_base_frame
 
