@@ -353,9 +353,15 @@ def test_a_held_needle_pushed_into_the_tissue_is_refused_not_slid_to_its_surface
     put the needle's tip 2.6 mm of arc into the tissue, its base end under the jaw. The fit put
     the tip where the wire meets the tissue, 14 deg off along the circle; slid up to 8 deg
     into the tissue the arc shows the same wire and still passes the pinch point
-    (``tissue_slide``): refused, saying so."""
+    (``tissue_slide``): refused, saying so. Since session 53 the tissue's cut shows the wire's
+    top past the surface at a shallow entry, so the fit itself finds the slide nearly free: a
+    rival 34 deg along the circle at 1.02x refuses it first, and without the rival and tie
+    gates the tissue slide still does."""
     stereo_model, left, right, T, priors, tissue = task_scene("held_start", 68, seed=82330937)
     loc = NeedleLocalizer(stereo_model, tissue=tissue)
+    with pytest.raises(NeedleNotFound, match=r"another pose .* 34 deg away .*cost 1\.02x"):
+        loc.localize(left, right, priors=priors)
+    loc.gates = replace(loc.gates, max_rival_ratio=0.0, max_tie_ratio=1.0)
     with pytest.raises(NeedleNotFound, match="meets the tissue and the needle may go on into it"):
         loc.localize(left, right, priors=priors)
     loc.gates = replace(loc.gates, max_tissue_slide_deg=float("inf"))
