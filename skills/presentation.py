@@ -33,9 +33,9 @@ from suture_bt.kinematics import UnreachablePoseError, inverse_kinematics
 from suture_bt.planning import to_base
 from suture_bt.skills.context import ArmHandle, TaskContext
 from suture_bt.skills.grasps import GRASP_DEPTH
+from suture_bt.skills.held_needle import clearance_at, needle_place_sets, needle_places
 from suture_bt.skills.line_of_sight import hidden_by_own_tool
 from suture_bt.skills.motion import feasible
-from suture_bt.skills.offset_evidence import held_circles
 from suture_bt.skills.tip_uncertainty import offset_displacements, tip_displacements, tip_margin
 from suture_bt.transforms import make_transform
 
@@ -109,9 +109,6 @@ HIDDEN_MAX = 0.15
 CHOSEN = 7
 #: Presentation points whose poses are taken in turn (a refusal moves to the next point).
 SPREAD_POINTS = 5
-#: Samples of the needle's circle (unknown grasp) and of its arc (known grasp).
-CIRCLE_SAMPLES = 16
-ARC_SAMPLES = 9
 
 
 def _side(ctx: TaskContext, arm: ArmHandle) -> float:
@@ -136,29 +133,6 @@ def presentation_point(ctx: TaskContext) -> np.ndarray:
     return presentation_points(ctx)[0]
 
 
-def needle_place_sets(ctx: TaskContext, arm: ArmHandle, T_tip: np.ndarray) -> list[np.ndarray]:
-    """The places the held needle may be with the jaw at ``T_tip`` (world points, before any
-    offset displacement), one set per way it may be held: its believed arc, or, unknown, the
-    whole circle on either side of the jaw (the jaw holds the wire along tip x, the centre
-    lies one radius along ±tip y), each with the pinch point."""
-    b = ctx.belief
-    r = ctx.needle.radius
-    if b is not None and b.holder == arm.name and b.T_tip_needle is not None:
-        T_needle = T_tip @ b.T_tip_needle
-        arc = ctx.needle.point_at(
-            np.linspace(ctx.needle.tip_angle, ctx.needle.base_angle, ARC_SAMPLES)
-        )
-        return [arc @ T_needle[:3, :3].T + T_needle[:3, 3]]
-    pinch = T_tip[:3, 3] - GRASP_DEPTH * T_tip[:3, 2]
-    sides = np.split(held_circles(T_tip, r, CIRCLE_SAMPLES), 2)
-    return [np.vstack([pinch[None], side]) for side in sides]
-
-
-def needle_places(ctx: TaskContext, arm: ArmHandle, T_tip: np.ndarray) -> np.ndarray:
-    """All the world points of :func:`needle_place_sets`."""
-    return np.vstack(needle_place_sets(ctx, arm, T_tip))
-
-
 def hidden_share(ctx: TaskContext, arm: ArmHandle, T_tip: np.ndarray, q: np.ndarray) -> float:
     """How much of the held needle the holder's own tool may hide at joints ``q`` (tip
     ``T_tip``): the worst of the ways it may be held (an unknown side of the jaw counts as
@@ -178,15 +152,6 @@ def displacements(
         return np.zeros((1, 3))
     d = offset_displacements(q, levels=2) if offsets is None else tip_displacements(q, offsets)
     return d @ arm.base_frame()[:3, :3].T
-
-
-def clearance_at(
-    ctx: TaskContext, arm: ArmHandle, T_tip: np.ndarray, displacements: np.ndarray
-) -> float:
-    """Least height (m) of the held needle above the tissue over its possible places."""
-    pts = needle_places(ctx, arm, T_tip)
-    moved = (pts[:, None, :] + displacements[None]).reshape(-1, 3)
-    return float(np.min(height_above_tissue(ctx.phantom, moved)))
 
 
 def needle_clearance(ctx: TaskContext, arm: ArmHandle, T_tip: np.ndarray) -> float:

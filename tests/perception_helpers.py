@@ -6,8 +6,14 @@ from __future__ import annotations
 import numpy as np
 from scipy.spatial.transform import Rotation
 
+from suture_bt.geometry import NeedleModel
 from suture_bt.interfaces import CameraModel, StereoCameraModel
-from suture_bt.transforms import make_transform, pose_to_transform
+from suture_bt.perception.edge_samples import mask_ends
+from suture_bt.perception.mask_view import MaskView
+from suture_bt.perception.needle_projection import project_cam, rasterize_needle, transform_points
+from suture_bt.transforms import invert, make_transform, pose_to_transform
+
+MODEL = NeedleModel()
 
 
 def stereo(width: int, height: int) -> StereoCameraModel:
@@ -45,6 +51,63 @@ def answer_index(fit) -> int:
     """The row of a fit's candidates that is its answer (found by pose: the cheapest
     candidate need not be the answer, as a prior may choose another)."""
     return next(i for i, P in enumerate(fit.candidates) if np.array_equal(P, fit.T_cam_needle))
+
+
+def _views(st: StereoCameraModel, T: np.ndarray) -> list[MaskView]:
+    """The needle's exact masks at ``T`` (left camera frame) in both eyes, cropped with a
+    4-pixel border."""
+    T_lr = invert(st.left.T_world_cam) @ st.right.T_world_cam
+    views = []
+    for cam, Tc in ((st.left, T), (st.right, invert(T_lr) @ T)):
+        m = rasterize_needle(cam, Tc, MODEL)
+        ys, xs = np.nonzero(m)
+        x0, y0 = xs.min() - 4, ys.min() - 4
+        views.append(MaskView(m[y0 : ys.max() + 5, x0 : xs.max() + 5], (int(x0), int(y0))))
+    return views
+
+
+def _scene_1080p(seed: int, noise_px: float):
+    """Stereo model, a pose 80-120 mm away, its two exact masks and noisy left end pixels."""
+    st = stereo(1920, 1080)
+    rng = np.random.default_rng(seed)
+    T = random_needle_pose(rng, 0.08, 0.12)
+    left, right = _views(st, T)
+    return st, T, left, right, _ends(st.left, T, rng, noise_px)
+
+
+def _ends(cam: CameraModel, T: np.ndarray, rng: np.random.Generator, noise_px: float):
+    """The needle's base and tip pixels in ``cam`` at ``T``, with Gaussian noise of ``noise_px``."""
+    e = project_cam(cam, transform_points(T, np.stack([MODEL.base, MODEL.tip])))
+    return e + rng.normal(0, noise_px, e.shape)
+
+
+def _tip_disc_hidden(view: MaskView, ends, share: float) -> MaskView:
+    """The view with a disc of radius ``share`` × the end pixels' distance blanked around
+    the tip end (an occluder such as a jaw)."""
+    m = view.mask.copy()
+    c = ends[1] - np.array(view.origin)
+    r = share * np.linalg.norm(ends[1] - ends[0])
+    yy, xx = np.mgrid[: m.shape[0], : m.shape[1]]
+    m[(xx - c[0]) ** 2 + (yy - c[1]) ** 2 < r**2] = False
+    return MaskView(m, view.origin)
+
+
+def _right_ends(st: StereoCameraModel, T: np.ndarray):
+    """The needle's exact base and tip pixels in the right eye (``T`` in the left camera frame)."""
+    T_lr = invert(st.left.T_world_cam) @ st.right.T_world_cam
+    return project_cam(
+        st.right, transform_points(invert(T_lr) @ T, np.stack([MODEL.base, MODEL.tip]))
+    )
+
+
+def _tip_hidden(st, T, left, right, ends):
+    """Both eyes' masks with a disc over the tip half (an occluder), and the left hypothesis
+    that stops short: base keypoint and the visible piece's far end."""
+    er = _right_ends(st, T)
+    occ = [_tip_disc_hidden(left, ends, 0.55), _tip_disc_hidden(right, er, 0.55)]
+    me = mask_ends(occ[0])
+    far = me[int(np.argmax([np.linalg.norm(p - ends[0]) for p in me]))]
+    return occ, (ends[0], far), er
 
 
 def task_scene(name: str, i: int, seed: int = 6173, masks: bool = False):

@@ -3,8 +3,7 @@ rival probe last), and ``probed`` replaces an answer that is the needle's depth-
 the needle (a cheaper pose, never a rival), while a right answer stays the answer."""
 
 import numpy as np
-from perception_helpers import pose_errors, recorded_fit
-from test_pose_fit import MODEL, _scene_1080p
+from perception_helpers import MODEL, _scene_1080p, pose_errors, recorded_fit
 
 from suture_bt.perception.answer_probes import (
     Finals,

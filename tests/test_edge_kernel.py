@@ -5,7 +5,7 @@ from dataclasses import replace
 
 import numpy as np
 import pytest
-from test_pose_fit import _scene_1080p
+from perception_helpers import _scene_1080p
 
 from suture_bt.geometry import NeedleModel
 from suture_bt.perception.edge_kernel import edge_normal_equations

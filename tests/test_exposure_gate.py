@@ -3,8 +3,8 @@ shows over the background, and lets the needle's own pose through; it refuses an
 little of which is seen."""
 
 import pytest
+from perception_helpers import _scene_1080p
 from test_needle_prior import _twin_case
-from test_pose_fit import _scene_1080p
 from test_unseen_arc import MODEL, _images_with_cover
 
 from suture_bt.perception.colour_refine import ColourRule

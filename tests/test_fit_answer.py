@@ -3,8 +3,7 @@ search's edge rays (the true pose of an exact outline fits it to a fraction of a
 answer seen obliquely has no rival among its own slides."""
 
 import numpy as np
-from perception_helpers import answer_index, pose_errors, recorded_fit
-from test_pose_fit import MODEL, _scene_1080p
+from perception_helpers import MODEL, _scene_1080p, answer_index, pose_errors, recorded_fit
 
 from suture_bt.perception.fit_answer import answer_result
 from suture_bt.perception.fit_search import StartSearch

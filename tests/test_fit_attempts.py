@@ -6,9 +6,16 @@ from dataclasses import replace
 
 import numpy as np
 import pytest
-from perception_helpers import pose_errors, recorded_fit, stereo
+from perception_helpers import (
+    MODEL,
+    _scene_1080p,
+    _tip_hidden,
+    _views,
+    pose_errors,
+    recorded_fit,
+    stereo,
+)
 from scipy.spatial.transform import Rotation
-from test_pose_fit import MODEL, _scene_1080p, _tip_hidden, _views
 
 from suture_bt.perception import pose_fit
 from suture_bt.perception.answer_gates import AnswerGates

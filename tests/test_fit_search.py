@@ -4,8 +4,7 @@ ends (and a close rival's), and how far the best pose's ends lie from the first 
 
 import numpy as np
 import pytest
-from perception_helpers import pose_errors, recorded_fit
-from test_pose_fit import MODEL, _scene_1080p
+from perception_helpers import MODEL, _scene_1080p, pose_errors, recorded_fit
 
 from suture_bt.perception.fit_search import StartSearch
 from suture_bt.perception.fit_starts import ends_moved

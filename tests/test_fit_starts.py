@@ -3,9 +3,8 @@ and spans depths × turns, and distinct basins go before copies of the best."""
 
 import numpy as np
 import pytest
-from perception_helpers import random_needle_pose, stereo
+from perception_helpers import MODEL, random_needle_pose, stereo
 from scipy.spatial.transform import Rotation
-from test_pose_fit import MODEL
 
 from suture_bt.perception.fit_starts import (
     DISTINCT,

@@ -10,7 +10,7 @@ from pathlib import Path
 import numba
 import numpy as np
 import pytest
-from test_pose_fit import _scene_1080p
+from perception_helpers import _scene_1080p
 
 from suture_bt.geometry import NeedleModel
 from suture_bt.perception import fit_solver

@@ -3,9 +3,8 @@ mirror twins, and a prior the image contradicts is a refusal naming it, never an
 
 import numpy as np
 import pytest
-from perception_helpers import pose_errors
+from perception_helpers import MODEL, _scene_1080p, _tip_disc_hidden, _tip_hidden, pose_errors
 from scipy.spatial.transform import Rotation
-from test_pose_fit import MODEL, _scene_1080p, _tip_disc_hidden, _tip_hidden
 
 from suture_bt.perception import pose_fit
 from suture_bt.perception.arc_geometry import arc_distance, plane_crossings

@@ -3,15 +3,25 @@ occlusion, and fails with NeedleNotFound on an empty mask."""
 
 import numpy as np
 import pytest
-from perception_helpers import pose_errors, random_needle_pose, recorded_fit, stereo
+from perception_helpers import (
+    MODEL,
+    _ends,
+    _right_ends,
+    _scene_1080p,
+    _tip_disc_hidden,
+    _tip_hidden,
+    _views,
+    pose_errors,
+    random_needle_pose,
+    recorded_fit,
+    stereo,
+)
 
-from suture_bt.geometry import NeedleModel
 from suture_bt.perception import pose_fit
 from suture_bt.perception.needle_projection import (
     params_to_pose,
     pose_to_params,
     project_cam,
-    rasterize_needle,
     transform_points,
 )
 from suture_bt.perception.pose_fit import (
@@ -24,58 +34,10 @@ from suture_bt.perception.pose_fit import (
     edge_jacobian,
     edge_points,
     edge_rays,
-    mask_ends,
     nearest_arc_angle,
     residuals,
-    robust_cost,
 )
 from suture_bt.transforms import invert
-
-MODEL = NeedleModel()
-
-
-def _views(st, T):
-    T_lr = invert(st.left.T_world_cam) @ st.right.T_world_cam
-    views = []
-    for cam, Tc in ((st.left, T), (st.right, invert(T_lr) @ T)):
-        m = rasterize_needle(cam, Tc, MODEL)
-        ys, xs = np.nonzero(m)
-        x0, y0 = xs.min() - 4, ys.min() - 4
-        views.append(MaskView(m[y0 : ys.max() + 5, x0 : xs.max() + 5], (int(x0), int(y0))))
-    return views
-
-
-def _scene_1080p(seed: int, noise_px: float):
-    """Stereo model, a pose 80-120 mm away, its two exact masks and noisy left end pixels."""
-    st = stereo(1920, 1080)
-    rng = np.random.default_rng(seed)
-    T = random_needle_pose(rng, 0.08, 0.12)
-    left, right = _views(st, T)
-    return st, T, left, right, _ends(st.left, T, rng, noise_px)
-
-
-def _ends(cam, T, rng, noise_px):
-    e = project_cam(cam, transform_points(T, np.stack([MODEL.base, MODEL.tip])))
-    return e + rng.normal(0, noise_px, e.shape)
-
-
-def test_edge_points_are_pixel_midpoints_in_image_coordinates():
-    m = np.zeros((5, 6), bool)
-    m[2, 3] = True
-    pts = edge_points(MaskView(m, (10, 20)))
-    expected = {(12.5, 22.0), (13.5, 22.0), (13.0, 21.5), (13.0, 22.5)}
-    assert {tuple(p) for p in pts} == expected
-
-
-def test_edge_points_where_the_mask_meets_an_occluder_are_left_out():
-    m = np.zeros((6, 8), bool)
-    m[2:4, 1:5] = True  # a 2×4 block; an occluder column right of it
-    occ = np.zeros_like(m)
-    occ[:, 5] = True
-    all_pts = edge_points(MaskView(m, (0, 0)))
-    cut = edge_points(MaskView(m, (0, 0), occluder=occ))
-    assert len(all_pts) - len(cut) == 2  # the two pairs across the block's right side
-    assert not np.any(np.isclose(cut[:, 0], 4.5))
 
 
 def _rays_near_the_needle(st, T, rng, n=120):
@@ -141,17 +103,6 @@ def test_fit_recovers_known_pose_at_1080p(seed):
     assert pos < 0.5 and ang < 1.5
     assert res.rms_px < 0.5 and res.inlier_fraction > 0.95
     np.testing.assert_allclose(res.T_world_needle, st.left.T_world_cam @ res.T_cam_needle)
-
-
-def _tip_disc_hidden(view: MaskView, ends, share: float) -> MaskView:
-    """The view with a disc of radius ``share`` × the end pixels' distance blanked around
-    the tip end (an occluder such as a jaw)."""
-    m = view.mask.copy()
-    c = ends[1] - np.array(view.origin)
-    r = share * np.linalg.norm(ends[1] - ends[0])
-    yy, xx = np.mgrid[: m.shape[0], : m.shape[1]]
-    m[(xx - c[0]) ** 2 + (yy - c[1]) ** 2 < r**2] = False
-    return MaskView(m, view.origin)
 
 
 def test_fit_tolerates_occlusion_of_a_third_of_the_needle():
@@ -294,13 +245,6 @@ def test_mask_ends_are_the_visible_arcs_extremes():
         mask_ends(MaskView(np.zeros((10, 10), bool)))
 
 
-def _right_ends(st, T):
-    T_lr = invert(st.left.T_world_cam) @ st.right.T_world_cam
-    return project_cam(
-        st.right, transform_points(invert(T_lr) @ T, np.stack([MODEL.base, MODEL.tip]))
-    )
-
-
 def test_end_prior_is_zero_at_either_projected_end_and_weighs_its_share():
     st, T, left, right, ends = _scene_1080p(4, 0.0)
     er = _right_ends(st, T)
@@ -314,16 +258,6 @@ def test_end_prior_is_zero_at_either_projected_end_and_weighs_its_share():
     assert np.all(r[1] > 5.0)  # 2 mm at ~0.1 m is ~16 px
     np.testing.assert_allclose(term.column_weights(500).sum(), END_PRIOR_SHARE * 500)
     assert not EndPriorTerm(st, MODEL, (np.zeros((0, 2)), np.zeros((0, 2))))
-
-
-def _tip_hidden(st, T, left, right, ends):
-    """Both eyes' masks with a disc over the tip half (an occluder), and the left hypothesis
-    that stops short: base keypoint and the visible piece's far end."""
-    er = _right_ends(st, T)
-    occ = [_tip_disc_hidden(left, ends, 0.55), _tip_disc_hidden(right, er, 0.55)]
-    me = mask_ends(occ[0])
-    far = me[int(np.argmax([np.linalg.norm(p - ends[0]) for p in me]))]
-    return occ, (ends[0], far), er
 
 
 @pytest.mark.parametrize("seed", [6, 8])
@@ -353,19 +287,6 @@ def test_end_priors_do_not_bias_the_polished_pose(monkeypatch):
     monkeypatch.setattr(EndPriorTerm, "polish", True)
     pulled = PoseFitter(st, MODEL).fit(left, right, tuple(ends), end_priors=priors)
     assert pulled.cost > 1.2 * plain.cost
-
-
-def test_geman_mcclure_caps_an_outlier_where_cauchy_keeps_growing():
-    r = np.array([[0.0, 0.5, 10.0, 100.0]])
-    gm = 2 * robust_cost(r[:, 2:], 1.0, loss="geman_mcclure") / 1.0
-    assert 0.98 < gm[0] < 1.0  # both outliers cost almost the cap (σ²/2 each)
-    cauchy = robust_cost(r, 1.0)
-    assert cauchy[0] > 2 * robust_cost(r, 1.0, loss="geman_mcclure")[0]
-    np.testing.assert_allclose(
-        robust_cost(r[:, :2], 1.0, loss="geman_mcclure"), robust_cost(r[:, :2], 1.0), rtol=0.15
-    )
-    with pytest.raises(ValueError, match="unknown loss"):
-        robust_cost(r, 1.0, loss="huber")
 
 
 def test_stray_mask_pixels_do_not_pull_the_final_choice_off_the_needle():

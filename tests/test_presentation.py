@@ -15,6 +15,7 @@ from suture_bt.sim.camera import stereo_model
 from suture_bt.sim.world import psm_base_frame
 from suture_bt.skills.context import ArmHandle, NeedleBelief
 from suture_bt.skills.grasps import GRASP_DEPTH, hand
+from suture_bt.skills.held_needle import needle_places
 from suture_bt.skills.presentation import (
     DEPTH,
     DEPTHS,
@@ -29,7 +30,6 @@ from suture_bt.skills.presentation import (
     iter_candidates,
     lifted_first,
     needle_clearance,
-    needle_places,
     presentation_point,
     presentation_points,
 )

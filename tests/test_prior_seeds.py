@@ -2,8 +2,8 @@
 nearest a port, placed where the needle is held."""
 
 import numpy as np
+from perception_helpers import MODEL
 from test_needle_prior import _arc_point
-from test_pose_fit import MODEL
 
 from suture_bt.perception.needle_prior import AcrossJawsPrior, HeldPrior, PortPrior
 from suture_bt.perception.prior_seeds import SEED_PLACES, SEED_TURNS, seed_poses

@@ -3,9 +3,8 @@ fit's predicted spread."""
 
 import numpy as np
 import pytest
-from perception_helpers import random_needle_pose, stereo
+from perception_helpers import _scene_1080p, _tip_disc_hidden, random_needle_pose, stereo
 from scipy.spatial.transform import Rotation
-from test_pose_fit import _scene_1080p, _tip_disc_hidden
 
 from suture_bt.geometry import NeedleModel
 from suture_bt.perception.edge_residuals import edge_rays

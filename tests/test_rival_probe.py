@@ -11,9 +11,8 @@ from functools import partial
 
 import numpy as np
 import pytest
-from perception_helpers import answer_index, pose_errors
+from perception_helpers import MODEL, _scene_1080p, _tip_hidden, _views, answer_index, pose_errors
 from scipy.spatial.transform import Rotation
-from test_pose_fit import MODEL, _scene_1080p, _tip_hidden, _views
 
 from suture_bt.perception.answer_gates import AnswerGates
 from suture_bt.perception.edge_residuals import edge_rays

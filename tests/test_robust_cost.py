@@ -1,4 +1,5 @@
-"""The robust cost's compiled pass gives numpy's bits, on one thread or several."""
+"""The robust cost's compiled pass gives numpy's bits, on one thread or several; Geman-McClure
+caps an outlier's cost where Cauchy keeps growing."""
 
 import os
 import subprocess
@@ -78,3 +79,16 @@ def test_the_kernels_load_from_numbas_disk_cache(tmp_path):
     ]
     assert [r.returncode for r in runs] == [0, 0], runs[-1].stderr[-500:]
     assert runs[0].stdout == runs[1].stdout and any(tmp_path.rglob("*.nbi"))
+
+
+def test_geman_mcclure_caps_an_outlier_where_cauchy_keeps_growing():
+    r = np.array([[0.0, 0.5, 10.0, 100.0]])
+    gm = 2 * robust_cost(r[:, 2:], 1.0, loss="geman_mcclure") / 1.0
+    assert 0.98 < gm[0] < 1.0  # both outliers cost almost the cap (σ²/2 each)
+    cauchy = robust_cost(r, 1.0)
+    assert cauchy[0] > 2 * robust_cost(r, 1.0, loss="geman_mcclure")[0]
+    np.testing.assert_allclose(
+        robust_cost(r[:, :2], 1.0, loss="geman_mcclure"), robust_cost(r[:, :2], 1.0), rtol=0.15
+    )
+    with pytest.raises(ValueError, match="unknown loss"):
+        robust_cost(r, 1.0, loss="huber")

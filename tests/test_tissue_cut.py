@@ -3,7 +3,7 @@ and the edge objective measured to the seen arc (a needle in a port no longer pa
 outline's end at the port unless it slides its own end there)."""
 
 import numpy as np
-from test_pose_fit import MODEL
+from perception_helpers import MODEL
 
 from suture_bt.perception.edge_residuals import edge_rays, residuals
 from suture_bt.perception.fit_solver import robust_cost

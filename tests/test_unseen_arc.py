@@ -147,8 +147,8 @@ def test_the_mirror_twin_of_a_needle_behind_a_jaw_runs_over_background(monkeypat
     """test_needle_prior's twin case: the tip half behind a jaw (grey, just over the hidden
     wire), the fit without priors answers the tilt-mirror twin > 10 mm off: the needle's
     unseen part is under the jaw, the twin's lies over the black background."""
+    from perception_helpers import _scene_1080p
     from test_needle_prior import _twin_case
-    from test_pose_fit import _scene_1080p
 
     from suture_bt.perception.exposure_gate import MAX_EXPOSED
     from suture_bt.perception.pose_fit import PoseFitter
