@@ -98,7 +98,8 @@ def fake_session() -> FakeSession:
 
 class Looking(py_trees.behaviour.Behaviour):
     """A skill's behaviour whose looks are refused on ticks 1 and 3 (in a finished sub-skill's
-    report on tick 3), then found on tick 4."""
+    report on tick 3, whose failure the skill's own list quotes, as an in-hand check's does),
+    then found on tick 4."""
 
     def __init__(self):
         super().__init__("Localize needle")
@@ -112,7 +113,7 @@ class Looking(py_trees.behaviour.Behaviour):
             report.setdefault("refusals", []).append("needle out of view")
         if self.n == 3:
             report["steps"] = [{"checks": [], "refusals": ["two views disagree: 4 mm"]}]
-            report["refusals"].append("valley 1.01x")
+            report["refusals"] += ["valley 1.01x", "look 2 failed: two views disagree: 4 mm"]
         return Status.SUCCESS if self.n == 4 else Status.RUNNING
 
 

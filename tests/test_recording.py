@@ -110,6 +110,8 @@ def test_tree_sink_logs_a_failure_with_its_reason_and_node(tmp_path):
 
 
 def test_tree_sink_logs_each_refused_look_once_with_its_node(tmp_path):
+    """Each refused look once, with its node: the skill's own entry quoting its sub-skill's
+    refusal is the same look and is not logged again."""
     session = looking_session()
     record_scripted(
         session, tmp_path / "x.rrd", {"passed": True, "tree_status": "SUCCESS", "ports": {}}

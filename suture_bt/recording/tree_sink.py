@@ -5,9 +5,10 @@ node, JSON), ``run/tree`` (the tree before the first tick), ``run/result`` (the 
 end); ``bt/nodes/<path>`` (a StateChange lane per node), ``bt/tree`` (py_trees' unicode tree
 whenever it changes), ``bt/log`` (skills starting and ending, every FAILURE with its reason;
 ``node_path`` beside), ``bt/checks`` (the skills' confirmations), ``bt/refusals`` (the skills'
-``refusals``: every look the needle sensor or localiser refused, with its reason, and where a
-skill ran a localisation step that failed, that step's reason, which quotes its looks'; a
-skill that looked again and went on leaves no FAILURE behind, so the reason would be lost)
+``refusals``: every look the needle sensor or localiser refused, with its reason, once: a
+skill's own entry that only quotes a look its sub-skill logged, as an in-hand check's failed
+localisation step does, is not logged again; a skill that looked again and went on leaves no
+FAILURE behind, so the reason would be lost)
 and ``bt/blackboard`` (the activity stream, READs at TRACE).
 """
 
@@ -74,6 +75,7 @@ class TreeSink(Sink):
         self._tree_text = ""
         self._seen: dict[int, Any] = {}  # id -> check already logged (kept: ids stay unique)
         self._refused: dict[int, tuple[list, int]] = {}  # id -> (refusal list, entries logged)
+        self._reasons: dict[int, list[str]] = {}  # node id -> refusal reasons logged
 
     def start(self, session: Any) -> None:
         rec, opts = self.rec, session.options
@@ -159,16 +161,23 @@ class TreeSink(Sink):
             self._log_refusals(node, session.observer.paths[node.id])
 
     def _log_refusals(self, node: Any, path: str) -> None:
-        """The refusals ``node``'s skill recorded since the last tick (``bt/refusals``)."""
+        """The refusals ``node``'s skill recorded since the last tick (``bt/refusals``), each
+        once (an entry quoting another of the node's is the same refused look)."""
+        new = []
         for reasons in all_refusals(node.skill.report):
             _, done = self._refused.get(id(reasons), (reasons, 0))
-            for reason in reasons[done:]:
-                self.rec.log(
-                    "bt/refusals",
-                    rr.TextLog(f"{node.name}: refused: {reason}", level=rr.TextLogLevel.WARN),
-                    rr.AnyValues(node_path=path),
-                )
+            new += reasons[done:]
             self._refused[id(reasons)] = (reasons, len(reasons))
+        logged = self._reasons.setdefault(id(node), [])
+        for reason in new:
+            if any(other != reason and other in reason for other in logged + new):
+                continue
+            logged.append(reason)
+            self.rec.log(
+                "bt/refusals",
+                rr.TextLog(f"{node.name}: refused: {reason}", level=rr.TextLogLevel.WARN),
+                rr.AnyValues(node_path=path),
+            )
 
     def error(self, session: Any, message: str) -> None:
         set_time(self.rec, session.ticks + 1, session.context.clock.now())
