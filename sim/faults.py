@@ -33,6 +33,7 @@ from typing import Any
 
 import numpy as np
 
+from suture_bt.kinematics.psm import GRASP_DEPTH
 from suture_bt.sim.camera import CaptureFault, light_direction
 from suture_bt.sim.fault_config import FAULT_KINDS, MAX_DRIFT_DEG, MAX_DRIFT_MM, FaultConfig
 from suture_bt.sim.joint_servo import JointPlant
@@ -42,8 +43,6 @@ from suture_bt.transforms import invert, make_transform
 MOVING_SPEED = 0.005
 #: A slide never leaves less than this arc (rad) between the held point and a needle end.
 END_MARGIN = 0.05
-#: Where the pinch point sits behind the tip control point (as ``world.GRASP_DEPTH``).
-_PINCH_DEPTH = 0.0015
 
 
 @dataclass(frozen=True)
@@ -354,7 +353,7 @@ class WorldFaults:
         w = self._world
         model = w.task.needle
         T = w.needle.T_link_needle  # tip frame <- needle frame
-        pinch = invert(T) @ np.array([0.0, 0.0, -_PINCH_DEPTH, 1.0])
+        pinch = invert(T) @ np.array([0.0, 0.0, -GRASP_DEPTH, 1.0])
         held = math.atan2(pinch[1], pinch[0]) % (2 * math.pi)
         lo, hi = model.tip_angle + END_MARGIN, model.base_angle - END_MARGIN
         new_held = min(hi, max(lo, held - float(p.get("slide_mm", 1.0)) * 1e-3 / model.radius))

@@ -24,7 +24,7 @@ import pybullet as pb
 
 from suture_bt.geometry import NeedleModel, PhantomModel
 from suture_bt.kinematics import forward_kinematics
-from suture_bt.kinematics.psm import JAW_CLOSED_THRESHOLD
+from suture_bt.kinematics.psm import GRASP_DEPTH, JAW_CLOSED_THRESHOLD
 from suture_bt.sim.camera import StereoEndoscope
 from suture_bt.sim.faults import WorldFaults, draw_plant
 from suture_bt.sim.grasp import GraspCheck, check_grasp
@@ -53,8 +53,6 @@ SRC_NEEDLE_REST_POSITION = (-0.0208, 0.0562, 0.0717)
 #: times are interpolated between updates, and the tip moves ~µm per tick, so nothing is lost,
 #: while it costs ~0.8 ms per update on a laptop CPU.
 BOOKKEEPING_TICKS = 4
-#: Where a held wire sits behind the tip control point, along −tip z (inside the blades).
-GRASP_DEPTH = 0.0015
 #: Jaw angle at which the blades touch a 0.72 mm wire held GRASP_DEPTH behind the tip.
 JAW_ON_NEEDLE = 0.08
 

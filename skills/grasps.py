@@ -11,11 +11,10 @@ from __future__ import annotations
 import numpy as np
 
 from suture_bt.geometry import NeedleModel
+from suture_bt.kinematics.psm import GRASP_DEPTH
 from suture_bt.planning import NeedleArc
 from suture_bt.transforms import invert, make_transform
 
-#: How far behind the tip control point the wire sits when held (m, along −tip z).
-GRASP_DEPTH = 0.0015
 #: Clear arc (rad) kept between the jaws and the needle's ends.
 END_MARGIN = np.deg2rad(8.0)
 #: Smallest arc angle (rad) between two jaws holding the needle at once.

@@ -30,6 +30,7 @@ from suture_bt.geometry import NeedleModel
 from suture_bt.geometry.phantom import TISSUE_TOP_Z
 from suture_bt.interfaces import CameraModel, StereoCameraModel
 from suture_bt.kinematics import forward_kinematics
+from suture_bt.kinematics.psm import GRASP_DEPTH
 from suture_bt.perception.network import INPUT_SIZE
 from suture_bt.sim.camera import LIGHT_DIRECTION_WORLD
 from suture_bt.transforms import invert, make_transform, rpy_to_matrix
@@ -41,7 +42,6 @@ RENDER_SIZE = (960, 544)
 #: Joint sampling ranges for random arm poses (rad, rad, m, rad, rad, rad).
 Q_LOW = np.array([-1.2, -0.9, 0.08, -2.5, -1.3, -1.3])
 Q_HIGH = np.array([1.2, 0.9, 0.22, 2.5, 1.3, 1.3])
-GRASP_DEPTH = 0.0015
 
 
 @dataclass(frozen=True)

@@ -33,6 +33,9 @@ JOINT_LIMITS = np.array(
 JAW_LIMITS = (0.0, 1.57)
 #: Jaw angles at or below this count as closing (DESIGN.md §5).
 JAW_CLOSED_THRESHOLD = 0.2
+#: How far behind the tip control point a held wire sits between the blades (m, along
+#: −tip z): the needle driver's pinch point, a fact of the tool like the lengths above.
+GRASP_DEPTH = 0.0015
 
 
 def _dh_rows(q: np.ndarray) -> list[tuple[float, float, float, float]]:
