@@ -61,10 +61,16 @@ def backed_off(T_world_tip: np.ndarray, distance: float) -> np.ndarray:
 
 
 def held_arc_angle(needle: NeedleModel, T_tip_needle: np.ndarray) -> float:
-    """Arc angle of the needle point nearest the jaw's pinch point."""
+    """Arc angle of the needle point nearest the jaw's pinch point; off the arc, the nearer
+    end (by angle around the circle, so a point just past the tip is the tip on either side
+    of angle zero)."""
     p = invert(T_tip_needle) @ np.array([0.0, 0.0, -GRASP_DEPTH, 1.0])
     a = float(np.arctan2(p[1], p[0])) % (2 * np.pi)
-    return float(np.clip(a, needle.tip_angle, needle.base_angle))
+    if needle.tip_angle <= a <= needle.base_angle:
+        return a
+    past_tip = (needle.tip_angle - a) % (2 * np.pi)
+    past_base = (a - needle.base_angle) % (2 * np.pi)
+    return float(needle.tip_angle if past_tip <= past_base else needle.base_angle)
 
 
 def insertion_grasp_angle(arc: NeedleArc) -> float:

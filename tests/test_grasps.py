@@ -101,6 +101,17 @@ def test_held_arc_angle_is_clipped_to_the_needle():
     assert held_arc_angle(NEEDLE, hand(NEEDLE, NEEDLE.base_angle + 0.3)) == NEEDLE.base_angle
 
 
+@pytest.mark.parametrize("a", [-0.3, -0.9, NEEDLE.base_angle + 2.3])
+def test_held_arc_angle_past_the_tip_across_angle_zero_is_the_tip(a):
+    # the off-arc gap spans angle zero: the nearer end is found around the circle
+    assert held_arc_angle(NEEDLE, hand(NEEDLE, a)) == NEEDLE.tip_angle
+
+
+@pytest.mark.parametrize("a", [NEEDLE.base_angle + 1.5, NEEDLE.base_angle + 1.9])
+def test_held_arc_angle_far_past_the_base_is_the_base(a):
+    assert held_arc_angle(NEEDLE, hand(NEEDLE, a)) == NEEDLE.base_angle
+
+
 @pytest.mark.parametrize(
     "T_phantom",
     [np.eye(4), pose_to_transform((0.03, -0.02, 0.0), (0.0, 0.0, 0.26))],
@@ -149,13 +160,3 @@ def test_backed_off_moves_along_minus_tip_z(d):
     np.testing.assert_allclose(B[:3, 3], T[:3, 3] - d * T[:3, 2], atol=1e-15)
     # In the original tip frame the new origin is at (0, 0, −d).
     np.testing.assert_allclose((invert(T) @ B)[:3, 3], [0.0, 0.0, -d], atol=1e-15)
-
-
-@pytest.mark.xfail(
-    strict=True,
-    reason="held_arc_angle wraps the pinch point's angle to [0, 2π) before clipping, so a "
-    "point past the tip at a negative arc angle (nearest needle point: the tip) is clipped "
-    "to the base end instead",
-)
-def test_held_arc_angle_past_the_tip_at_negative_angle_is_the_tip():
-    assert held_arc_angle(NEEDLE, hand(NEEDLE, -0.3)) == NEEDLE.tip_angle
