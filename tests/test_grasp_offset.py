@@ -3,7 +3,7 @@
 import numpy as np
 import pytest
 from scipy.spatial.transform import Rotation
-from test_presentation import make_arm, make_ctx
+from skill_helpers import make_arm, make_ctx
 from test_second_view import TRUE_OFFSET, _presented
 
 from suture_bt.skills.grasp_offset import MAX_ANGLE_DEG, offset_from_grasp

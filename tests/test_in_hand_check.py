@@ -2,7 +2,7 @@
 (the second look that must agree is exercised in the full tree, test_recovery_branches)."""
 
 import numpy as np
-from test_presentation import make_arm, make_ctx
+from skill_helpers import make_arm, make_ctx
 
 from suture_bt.skills.grasps import hand
 from suture_bt.skills.in_hand_check import DRIFT_JAW, DRIFT_POSITION, CheckInHand

@@ -2,7 +2,7 @@
 
 import numpy as np
 import pytest
-from test_presentation import PHANTOMS, make_arm, make_ctx
+from skill_helpers import PHANTOMS, make_arm, make_ctx
 
 from suture_bt.geometry.tissue_surface import height_above_tissue
 from suture_bt.skills.grasps import GRASP_DEPTH

@@ -5,7 +5,7 @@ from types import SimpleNamespace
 
 import numpy as np
 from scipy.spatial.transform import Rotation
-from test_presentation import CAMERA, make_arm, make_ctx
+from skill_helpers import CAMERA, make_arm, make_ctx
 from test_second_view import TRUE_OFFSET, _presented
 
 from suture_bt.geometry import NeedleModel, PhantomModel

@@ -1,7 +1,7 @@
 """The needle sensor's working range: a needle nearer the cameras than the localiser's floor."""
 
 import numpy as np
-from test_presentation import CAMERA
+from skill_helpers import CAMERA
 
 from suture_bt.perception.needle_localizer import MIN_DEPTH
 from suture_bt.skills.needle_sensor import RANGE_MARGIN, in_working_range

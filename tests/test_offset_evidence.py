@@ -4,7 +4,7 @@ under which it could not be in the jaw."""
 
 import numpy as np
 import pytest
-from test_presentation import CAMERA, make_arm, make_ctx
+from skill_helpers import CAMERA, make_arm, make_ctx
 
 from suture_bt.kinematics import forward_kinematics, inverse_kinematics
 from suture_bt.planning import to_base

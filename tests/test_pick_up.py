@@ -171,7 +171,7 @@ def test_a_needle_believed_held_is_not_picked_up():
 def test_where_an_eye_saw_needle_is_found_on_the_tissue_top_for_the_arms_to_make_way():
     from types import SimpleNamespace
 
-    from test_presentation import CAMERA, PHANTOMS, make_ctx
+    from skill_helpers import CAMERA, PHANTOMS, make_ctx
 
     from suture_bt.skills.pick_up import seen_on_tissue
 

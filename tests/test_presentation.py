@@ -1,19 +1,14 @@
 """Presentation poses: pinch points in view, reachable jaw poses, the needle clear of the tissue."""
 
-from types import SimpleNamespace
-
 import numpy as np
 import pytest
+from skill_helpers import CAMERA, PHANTOMS, make_arm, make_ctx
 
 from suture_bt.calibration.calibration_pose import offset_box_points
-from suture_bt.control import PIServo
-from suture_bt.geometry import NeedleModel, PhantomModel
 from suture_bt.geometry.tissue_surface import height_above_tissue
 from suture_bt.kinematics import forward_kinematics, inverse_kinematics
 from suture_bt.planning import to_base
-from suture_bt.sim.camera import stereo_model
-from suture_bt.sim.world import psm_base_frame
-from suture_bt.skills.context import ArmHandle, NeedleBelief
+from suture_bt.skills.context import NeedleBelief
 from suture_bt.skills.grasps import GRASP_DEPTH, hand
 from suture_bt.skills.held_needle import needle_places
 from suture_bt.skills.presentation import (
@@ -34,51 +29,7 @@ from suture_bt.skills.presentation import (
     presentation_points,
 )
 from suture_bt.skills.tip_uncertainty import worst_offset_displacement
-from suture_bt.transforms import make_transform, pose_to_transform
-
-#: The scene's initial joints (sim/default_scene.yaml).
-INITIAL_JP = {
-    "psm1": (0.4, -0.22, 0.139, 1.64, -0.37, 0.11),
-    "psm2": (-0.4, -0.22, 0.139, -1.64, -0.37, -0.11),
-}
-CAMERA = SimpleNamespace(model=stereo_model(1920, 1080))
-PHANTOMS = {
-    "default": np.eye(4),
-    "moved": pose_to_transform((0.03, -0.02, 0.0), (0.0, 0.0, 0.26)),
-    "tilted": pose_to_transform((0.0, 0.01, 0.0), (0.2, 0.1, 0.0)),
-}
-
-
-class FakeArm:
-    """Measured joints fixed at the scene's initial pose; servo commands are recorded."""
-
-    def __init__(self, name: str):
-        self.name = name
-        self.q = np.array(INITIAL_JP[name])
-        self.commands = []
-
-    def base_frame(self) -> np.ndarray:
-        return psm_base_frame(self.name)
-
-    def measured_jp(self) -> np.ndarray:
-        return self.q.copy()
-
-    def servo_jp(self, jp) -> None:
-        self.commands.append(np.asarray(jp))
-
-
-def make_ctx(T_world_phantom=None):
-    return SimpleNamespace(
-        camera=CAMERA,
-        phantom=PhantomModel(np.eye(4) if T_world_phantom is None else T_world_phantom),
-        needle=NeedleModel(),
-        belief=None,
-    )
-
-
-def make_arm(name: str = "psm2") -> ArmHandle:
-    fake = FakeArm(name)
-    return ArmHandle(name, fake, PIServo(fake))
+from suture_bt.transforms import make_transform
 
 
 def clearance(ctx, p) -> float:

@@ -2,7 +2,7 @@
 
 import numpy as np
 from scipy.spatial.transform import Rotation
-from test_presentation import CAMERA, make_arm, make_ctx
+from skill_helpers import CAMERA, make_arm, make_ctx
 
 from suture_bt.kinematics import JOINT_LIMITS, forward_kinematics, inverse_kinematics
 from suture_bt.planning import to_base

@@ -123,7 +123,7 @@ def test_grasp_leaves_room_reads_the_planners_grasp_limit():
 
 
 def test_grasp_reaches_says_when_the_held_needle_cannot_be_brought_to_the_approach():
-    from test_presentation import make_arm
+    from skill_helpers import make_arm
 
     from suture_bt.geometry import NeedleModel, PhantomModel
     from suture_bt.planning import plan_needle_arc
