@@ -5,8 +5,7 @@ from types import SimpleNamespace
 
 import numpy as np
 from scipy.spatial.transform import Rotation
-from skill_helpers import CAMERA, make_arm, make_ctx
-from test_second_view import TRUE_OFFSET, _presented
+from skill_helpers import CAMERA, TRUE_OFFSET, make_arm, make_ctx, presented
 
 from suture_bt.geometry import NeedleModel, PhantomModel
 from suture_bt.skills import localize_needle
@@ -90,7 +89,7 @@ def _uncalibrated_holder(monkeypatch, answers):
     ``answers`` (each: which pose, "true" or "twin", the needle carried with the arm)."""
 
     arm = make_arm("psm2")
-    q0, T_true = _presented(arm, make_ctx())
+    q0, T_true = presented(arm, make_ctx())
     needle = NeedleModel()
     # The "twin" slides 40° round its circle about the held point: the wire still passes
     # between the jaws and its plane is the needle's, so neither the held-by nor the

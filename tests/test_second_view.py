@@ -2,29 +2,11 @@
 
 import numpy as np
 from scipy.spatial.transform import Rotation
-from skill_helpers import CAMERA, make_arm, make_ctx
+from skill_helpers import CAMERA, TRUE_OFFSET, make_arm, make_ctx, presented
 
-from suture_bt.kinematics import JOINT_LIMITS, forward_kinematics, inverse_kinematics
-from suture_bt.planning import to_base
-from suture_bt.skills.grasps import hand
-from suture_bt.skills.presentation import candidate_poses
+from suture_bt.kinematics import JOINT_LIMITS
 from suture_bt.skills.second_view import TURNS, agree_under_some_offset, carried, wrist_turn
 from suture_bt.transforms import make_transform, rotation_angle
-
-TRUE_OFFSET = np.array([np.deg2rad(2.5), np.deg2rad(-2.5), 0.0025])  # a grid point of the bound
-
-
-def _presented(arm, ctx):
-    """Joints (measured) of a presentation pose and the needle's true pose held there, for an
-    arm whose measured joints read ``TRUE_OFFSET`` less than its true ones."""
-    T = candidate_poses(ctx, arm, limit=1)[0]
-    q = inverse_kinematics(to_base(T, arm.base_frame()), arm.servo.setpoint_jp())
-    arm.arm.q = q.copy()
-    arm.servo.reset()
-    q_true = q.copy()
-    q_true[:3] += TRUE_OFFSET
-    T_grasp = hand(ctx.needle, np.deg2rad(150.0))
-    return q, arm.base_frame() @ forward_kinematics(q_true) @ T_grasp
 
 
 def _moved(arm, q_from, q_to, T_grasp_world):
@@ -34,7 +16,7 @@ def _moved(arm, q_from, q_to, T_grasp_world):
 
 def test_the_needle_carried_through_a_wrist_turn_agrees_whatever_the_offset():
     ctx, arm = make_ctx(), make_arm("psm2")
-    q, T_needle = _presented(arm, ctx)
+    q, T_needle = presented(arm, ctx)
     q_turn = q.copy()
     q_turn[5] += 0.3
     seen_after = _moved(arm, q, q_turn, T_needle)
@@ -50,7 +32,7 @@ def test_the_needle_carried_through_a_wrist_turn_agrees_whatever_the_offset():
 
 def test_a_mirror_twin_of_the_first_view_does_not_agree_with_the_second():
     ctx, arm = make_ctx(), make_arm("psm2")
-    q, T_needle = _presented(arm, ctx)
+    q, T_needle = presented(arm, ctx)
     # A twin: the needle turned 150° about an axis in its plane through the seen arc (the
     # localiser's confident wrong answers at the Task 3 start were 17-19 mm / 135-179° off).
     flip = make_transform(
@@ -69,7 +51,7 @@ def test_a_mirror_twin_of_the_first_view_does_not_agree_with_the_second():
 
 def test_the_wrist_turn_stays_in_the_joint_limits_and_keeps_the_needle_in_view():
     ctx, arm = make_ctx(), make_arm("psm2")
-    q, T_needle = _presented(arm, ctx)
+    q, T_needle = presented(arm, ctx)
     turn = wrist_turn(ctx, arm, q, T_needle)
     assert turn is not None
     q_turn, k = turn
