@@ -96,10 +96,10 @@ import sys
 import numpy as np
 sys.path.insert(0, {tests!r})
 {first}
-from test_edge_kernel import MODEL, _poses_near_the_needle
+from perception_helpers import MODEL, poses_near_the_needle
 from suture_bt.perception.edge_kernel import edge_normal_equations
 from suture_bt.perception.fit_solver import FD_STEPS
-rays, T, T6 = _poses_near_the_needle()
+rays, T, T6 = poses_near_the_needle()
 out = edge_normal_equations(T, T6, FD_STEPS, rays, MODEL, 1.0, "cauchy")
 print(hashlib.sha1(b"".join(np.ascontiguousarray(a).tobytes() for a in out)).hexdigest())
 """

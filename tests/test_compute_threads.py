@@ -14,10 +14,10 @@ import torch
 from suture_bt.compute_threads import set_compute_threads
 {setup}
 sys.path.insert(0, {tests!r})
-from test_edge_kernel import MODEL, _poses_near_the_needle
+from perception_helpers import MODEL, poses_near_the_needle
 from suture_bt.perception.edge_kernel import edge_normal_equations
 from suture_bt.perception.fit_solver import FD_STEPS
-rays, T, T6 = _poses_near_the_needle()
+rays, T, T6 = poses_near_the_needle()
 torch.get_num_threads()  # torch's pool is up, as once the localiser's network has run
 edge_normal_equations(T, T6, FD_STEPS, rays, MODEL, 1.0, "cauchy")  # numba's parallel loop
 print(torch.get_num_threads())

@@ -5,35 +5,17 @@ from dataclasses import replace
 
 import numpy as np
 import pytest
-from perception_helpers import _scene_1080p
+from perception_helpers import MODEL, _scene_1080p, poses_near_the_needle
 
-from suture_bt.geometry import NeedleModel
 from suture_bt.perception.edge_kernel import edge_normal_equations
-from suture_bt.perception.edge_residuals import edge_jacobian, edge_rays, residuals
+from suture_bt.perception.edge_residuals import edge_jacobian, residuals
 from suture_bt.perception.fit_solver import FD_STEPS, _irls_weights
-from suture_bt.perception.mask_view import edge_points
-from suture_bt.perception.needle_projection import params_to_pose, pose_to_params
 from suture_bt.perception.tissue_cut import TissueCut
-
-MODEL = NeedleModel()
-
-
-def _poses_near_the_needle(n: int = 24):
-    """Rays of a 1080p needle's outline, and poses (with their stepped poses) scattered about
-    it, the last one infeasible (NaN)."""
-    st, T, left, right, _ = _scene_1080p(7, 0.0)
-    rays = edge_rays(st, edge_points(left)[::3], edge_points(right)[::3])
-    x = pose_to_params(T[None], st.left, MODEL)
-    x = x + np.random.default_rng(0).normal(0, [2, 2, 2, 2, 0.05, 0.2], (n, 6))
-    x[-1, 4] = -1.0  # infeasible
-    steps = np.concatenate([np.zeros((1, 6)), np.diag(FD_STEPS)])
-    P = params_to_pose(x[:, None] + steps[None], st.left, MODEL)
-    return rays, np.ascontiguousarray(P[:, 0]), P[:, 1:]
 
 
 @pytest.mark.parametrize("loss", ["cauchy", "geman_mcclure"])
 def test_kernel_matches_the_numpy_residuals_and_normal_equations(loss):
-    rays, T, T6 = _poses_near_the_needle()
+    rays, T, T6 = poses_near_the_needle()
     r, theta = residuals(T, rays, MODEL)
     dT = (T6 - T[:, None]) / FD_STEPS[None, :, None, None]
     J = edge_jacobian(T, dT, rays, MODEL, theta)
@@ -57,7 +39,7 @@ def test_kernel_matches_the_numpy_residuals_and_normal_equations(loss):
 
 
 def test_seeded_search_matches_and_residuals_alone_leave_the_system_empty():
-    rays, T, _ = _poses_near_the_needle()
+    rays, T, _ = poses_near_the_needle()
     _, theta = residuals(T, rays, MODEL)
     moved = T.copy()
     moved[:, :3, 3] += 2e-4  # a nearby pose, searched from the previous angles
@@ -79,7 +61,7 @@ def test_kernel_matches_the_numpy_objective_where_the_tissue_cuts_the_needle():
     """A surface plane through the needle at 110° of arc, the base's side below it: rays
     whose nearest arc point is hidden measure to the cut in both, and the cut's motion with
     the pose enters both Jacobians (finite differences of different steps: looser)."""
-    rays, T, T6 = _poses_near_the_needle()
+    rays, T, T6 = poses_near_the_needle()
     T, T6 = T[:-1], T6[:-1]
     st, T_true, *_ = _scene_1080p(7, 0.0)
     theta = np.radians(110.0)
@@ -104,7 +86,7 @@ def test_kernel_matches_the_numpy_objective_where_the_tissue_cuts_the_needle():
 def test_the_cut_s_motion_with_the_pose_is_in_the_jacobian():
     """For rays measured to the cut, the analytic derivative (the cut sliding along the arc
     as the pose moves) matches the residuals' finite differences."""
-    rays, T, T6 = _poses_near_the_needle()
+    rays, T, T6 = poses_near_the_needle()
     T, T6 = T[:-1], T6[:-1]
     _, T_true, *_ = _scene_1080p(7, 0.0)
     theta = np.radians(110.0)

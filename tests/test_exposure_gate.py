@@ -3,9 +3,7 @@ shows over the background, and lets the needle's own pose through; it refuses an
 little of which is seen."""
 
 import pytest
-from perception_helpers import _scene_1080p
-from test_needle_prior import _twin_case
-from test_unseen_arc import MODEL, _images_with_cover
+from perception_helpers import MODEL, _scene_1080p, images_with_cover, twin_case
 
 from suture_bt.perception.colour_refine import ColourRule
 from suture_bt.perception.exposure_gate import ExposureGate
@@ -18,9 +16,9 @@ def _twin_scene(monkeypatch):
     near probe moves it to a neighbouring twin 130° off that shows its arc in one eye only,
     which the localiser's rival probe refuses, and the twin probe back to the needle: both off
     here, so the gate's own case stays.)"""
-    st, T, occ, short, kw = _twin_case(monkeypatch)
+    st, T, occ, short, kw = twin_case(monkeypatch)
     _, _, left, right, _ = _scene_1080p(10, 0.0)
-    images = _images_with_cover(st, (left, right), occ, px=2)
+    images = images_with_cover(st, (left, right), occ, px=2)
     fitter = PoseFitter(st, MODEL, probe_near=False, probe_twin=False, probe_wide=False)
     twin = fitter.fit(*occ, short, **kw).T_cam_needle
     return st, T, twin, images, tuple(occ)

@@ -5,8 +5,8 @@ import dataclasses
 
 import numpy as np
 import pytest
+from recovery_helpers import finish, node, passed, running
 from scipy.spatial.transform import Rotation
-from test_recovery_branches import finish, node, passed, running
 
 from suture_bt.runtime.session import RunOptions, Session
 from suture_bt.sim.ground_truth import GroundTruth

@@ -11,6 +11,8 @@ from perception_helpers import (
     _scene_1080p,
     _tip_hidden,
     _views,
+    attempts_with_gates,
+    clean_outline_args,
     pose_errors,
     recorded_fit,
     stereo,
@@ -18,7 +20,6 @@ from perception_helpers import (
 from scipy.spatial.transform import Rotation
 
 from suture_bt.perception import pose_fit
-from suture_bt.perception.answer_gates import AnswerGates
 from suture_bt.perception.colour_refine import ColourRule
 from suture_bt.perception.exposure_gate import ExposureGate
 from suture_bt.perception.fit_attempts import FitAttempts, _same_pair
@@ -39,31 +40,17 @@ def test_end_pairs_match_in_either_order_within_tolerance():
     assert not _same_pair(a, (a[1], a[0] + 5.0))
 
 
-def _attempts(st, **gates) -> FitAttempts:
-    """The fit stage with these gates changed from the defaults."""
-    return FitAttempts(st, MODEL, ColourRule(), PoseFitter(st, MODEL), AnswerGates(**gates))
-
-
-def _args(seed: int = 7):
-    """A 1080p needle's exact masks on black images, its true end pixels as keypoints."""
-    st, T, left, right, ends = _scene_1080p(seed, 0.0)
-    images = tuple(np.zeros((1080, 1920, 3), np.uint8) for _ in range(2))
-    kp = np.stack([ends, ends])
-    score = np.full((2, 2), 0.9)
-    return st, T, (images, (left, right), tuple(ends), None, 2.0, None, kp, score)
-
-
 def test_a_clean_outline_is_answered_and_each_gate_refuses_with_its_reason():
-    st, T, args = _args()
-    fit = _attempts(st)(*args)
+    st, T, args = clean_outline_args()
+    fit = attempts_with_gates(st)(*args)
     pos, ang = pose_errors(fit.T_cam_needle, T)
     assert pos < 0.5 and ang < 1.0
     with pytest.raises(NeedleNotFound, match="RMS"):
-        _attempts(st, max_rms_px=0.0)(*args)
+        attempts_with_gates(st, max_rms_px=0.0)(*args)
     with pytest.raises(NeedleNotFound, match="leaves the pose loose"):
-        _attempts(st, max_angle_std_deg=0.0)(*args)
+        attempts_with_gates(st, max_angle_std_deg=0.0)(*args)
     with pytest.raises(NeedleNotFound, match="leaves the needle's position loose"):
-        _attempts(st, max_position_std_mm=0.0)(*args)
+        attempts_with_gates(st, max_position_std_mm=0.0)(*args)
 
 
 def test_an_answer_with_a_close_rival_is_refused_with_its_reason(monkeypatch):
@@ -78,30 +65,30 @@ def test_an_answer_with_a_close_rival_is_refused_with_its_reason(monkeypatch):
     images = tuple(np.zeros((1080, 1920, 3), np.uint8) for _ in range(2))
     args = (images, tuple(occ), short, None, 2.0, None, np.stack([short, short]), np.zeros((2, 2)))
     loose = dict(max_angle_std_deg=float("inf"), refit_moved_px=float("inf"))
-    slid = _attempts(st, **loose)(*args)
+    slid = attempts_with_gates(st, **loose)(*args)
     assert pose_errors(slid.T_cam_needle, T)[1] > 50.0 and slid.rival_ratio == float("inf")
     with pytest.raises(NeedleNotFound, match="hidden by nothing"):
         ExposureGate(st, MODEL, ColourRule(), None)(images, tuple(occ), slid.T_cam_needle, ())
     monkeypatch.setattr("suture_bt.perception.rival_probe.OBLIQUE_MAX_DEG", 0.0)
     with pytest.raises(NeedleNotFound, match="another pose .* explains the outline almost as well"):
-        _attempts(st, **loose)(*args)
+        attempts_with_gates(st, **loose)(*args)
     # Nothing says the tip is hidden (black images, no grey occluder): the answer's ends moved
     # from the keypoints, and a refit from them finds a cheaper pose 55 deg off with no close
     # rival of its own. The first answer, 1.15x its cost, is its rival: still refused.
     with pytest.raises(NeedleNotFound, match="another pose .* explains the outline almost as well"):
-        _attempts(st, max_angle_std_deg=float("inf"))(*args)
+        attempts_with_gates(st, max_angle_std_deg=float("inf"))(*args)
     # Without the fit's own second search from ends far from the keypoints (which finds the
     # cheaper pose, with the first as its rival, as the refit does) the answer's rival ties it:
     # without the rival gate the tie gate refuses it.
     monkeypatch.setattr(pose_fit, "RESEED_MOVED_PX", float("inf"))
     with pytest.raises(NeedleNotFound, match="explain the outline equally well"):
-        _attempts(st, max_rival_ratio=0.0, **loose)(*args)
+        attempts_with_gates(st, max_rival_ratio=0.0, **loose)(*args)
     # Without the tie gates too, the valley gate refuses it: the rival is a pose tilted
     # beside it at the same cost.
     no_ties = dict(max_rival_ratio=0.0, max_tie_ratio=0.0, max_tie_ratio_far=0.0, **loose)
     with pytest.raises(NeedleNotFound, match="a pose tilted .* explains the outline"):
-        _attempts(st, **no_ties)(*args)
-    fit = _attempts(st, max_valley_ratio=0.0, **no_ties)(*args)
+        attempts_with_gates(st, **no_ties)(*args)
+    fit = attempts_with_gates(st, max_valley_ratio=0.0, **no_ties)(*args)
     assert fit.rival_ratio <= MAX_RIVAL_RATIO and fit.tie_ratio <= MAX_TIE_RATIO
 
 
@@ -135,11 +122,11 @@ def test_an_answer_whose_ends_moved_far_from_every_hypothesis_is_searched_again_
     """The fit's ends land 22 px from the keypoint it started from: it is refit from its own
     ends over every depth, and the cheaper answer (its ends where it found them) stands."""
     st, T, base, args = _bulge_keypoint_args()
-    once = _attempts(st, refit_moved_px=float("inf"))
+    once = attempts_with_gates(st, refit_moved_px=float("inf"))
     once.fitter.probe_twin = False  # the refit alone (the twin probe also finds it, below)
     once = once(*args)
     assert once.ends_moved_px > 8.0
-    refit = _attempts(st)
+    refit = attempts_with_gates(st)
     refit.fitter.probe_twin = False
     fit = refit(*args)
     assert fit.ends_moved_px < 1.0 and fit.cost <= once.cost
@@ -147,7 +134,7 @@ def test_an_answer_whose_ends_moved_far_from_every_hypothesis_is_searched_again_
     _, ang_swapped = pose_errors(fit.T_cam_needle, MODEL.swapped(T))
     assert pos < 1.0 and min(ang, ang_swapped) < 1.0
     # Session 27: the answer's depth-mirror twin, probed, is this needle at the same cost.
-    twin = _attempts(st, refit_moved_px=float("inf"))(*args)
+    twin = attempts_with_gates(st, refit_moved_px=float("inf"))(*args)
     assert np.isclose(twin.cost, fit.cost, rtol=1e-3)
     pos, ang = pose_errors(twin.T_cam_needle, T)
     _, ang_swapped = pose_errors(twin.T_cam_needle, MODEL.swapped(T))
@@ -184,11 +171,11 @@ def test_a_refit_that_finds_the_same_pose_again_keeps_the_first_fits_rival():
     """The refit from the answer's own ends may land on the same pose, cheaper by rounding
     alone, with no close rival of its own: the first fit's rival still stands (which of the
     two is cheaper is a coin toss that differed between two installs of the same code)."""
-    st, T, args = _args()
-    fit = _attempts(st)(*args)
+    st, T, args = clean_outline_args()
+    fit = attempts_with_gates(st)(*args)
     first = replace(fit, rival_ratio=1.1, rival_offset=(1.0, 20.0))
     again = replace(fit, cost=fit.cost * (1.0 - 1e-9), rival_ratio=float("inf"), rival_offset=None)
-    kept = _attempts(st)._refit_from_own_ends(first, lambda main, alternatives: again)
+    kept = attempts_with_gates(st)._refit_from_own_ends(first, lambda main, alternatives: again)
     assert kept.cost == again.cost
     assert kept.rival_ratio == 1.1 and kept.rival_offset == (1.0, 20.0)
 
@@ -209,8 +196,8 @@ def test_a_far_answer_tied_with_its_mirror_twin_is_refused():
         if pose_errors(P, T)[0] < 2.0
     ]
     assert truth and min(truth) / fit.cost == pytest.approx(fit.tie_ratio)
-    attempts = _attempts(fitter.stereo)
+    attempts = attempts_with_gates(fitter.stereo)
     with pytest.raises(NeedleNotFound, match=r"limit 1\.10 at 145 mm"):
         attempts._check(fit, ())
     # Held to the near limit, the twin would have been answered.
-    _attempts(fitter.stereo, far_tie_depth=float("inf"))._check(fit, ())
+    attempts_with_gates(fitter.stereo, far_tie_depth=float("inf"))._check(fit, ())

@@ -10,13 +10,10 @@ from pathlib import Path
 import numba
 import numpy as np
 import pytest
-from perception_helpers import _scene_1080p
+from perception_helpers import MODEL, lm_problem
 
-from suture_bt.geometry import NeedleModel
 from suture_bt.perception import fit_solver
-from suture_bt.perception.edge_residuals import edge_rays
 from suture_bt.perception.fit_solver import levenberg_marquardt
-from suture_bt.perception.fit_terms import EndPriorTerm
 from suture_bt.perception.lm_step import (
     SERIAL_MAX_POSES,
     _extra_residuals,
@@ -24,48 +21,11 @@ from suture_bt.perception.lm_step import (
     lm_trial,
     trial_arrays,
 )
-from suture_bt.perception.mask_view import edge_points
-from suture_bt.perception.needle_prior import HeldPrior, PortPrior
-from suture_bt.perception.needle_projection import (
-    params_to_pose,
-    pose_to_params,
-    project_cam,
-    transform_points,
-)
-from suture_bt.perception.prior_term import HeldPlaceTerm, PriorTerm
-from suture_bt.perception.tissue_cut import TissueCut
-
-MODEL = NeedleModel()
-
-
-def _problem(cut: bool):
-    """A 1080p needle's edge rays (optionally cut by a surface plane at 110° of arc), starts
-    scattered about it, and the fit's terms: keypoints, a held place, a port."""
-    st, T, left, right, _ = _scene_1080p(7, 0.0)
-    rays = edge_rays(st, edge_points(left)[::3], edge_points(right)[::3])
-    if cut:
-        theta = np.radians(110.0)
-        point = T[:3, :3] @ MODEL.point_at(theta) + T[:3, 3]
-        normal = T[:3, :3] @ np.array([np.sin(theta), -np.cos(theta), 0.0])
-        rays.cut = TissueCut.from_ports([(point, normal)], np.eye(4), MODEL)
-    rng = np.random.default_rng(1)
-    x = pose_to_params(T[None], st.left, MODEL) + rng.normal(0, [2, 2, 2, 2, 0.05, 0.2], (8, 6))
-    ends = np.stack([MODEL.base, MODEL.tip])
-    kps = [project_cam(c, transform_points(c.T_cam_world @ st.left.T_world_cam @ T, ends))
-           for c in (st.left, st.right)]  # fmt: skip
-    T_world = st.left.T_world_cam @ T
-    a = MODEL.tip_angle + 0.6
-    pinch = T_world[:3, :3] @ MODEL.point_at(a) + T_world[:3, 3]
-    port = T_world[:3, :3] @ MODEL.point_at(a + 0.8) + T_world[:3, 3]
-    priors = [HeldPrior("psm1", pinch, 0.001, arc_angle=a), PortPrior("exit1", port, 0.003)]
-    keypoints = EndPriorTerm(st, MODEL, (kps[0][:1] + 1.5, kps[1]))
-    place = HeldPlaceTerm(priors, st.left.T_cam_world, MODEL)
-    points = PriorTerm(priors, st.left.T_cam_world, MODEL)
-    return st, rays, x, [keypoints, place, points]
+from suture_bt.perception.needle_projection import params_to_pose
 
 
 def test_the_extra_residuals_are_the_terms_own_bits():
-    st, _, x, terms = _problem(cut=False)
+    st, _, x, terms = lm_problem(cut=False)
     steps = np.concatenate([np.zeros((1, 6)), np.diag(fit_solver.FD_STEPS)])
     T = params_to_pose(x[:, None] + steps[None], st.left, MODEL).reshape(-1, 4, 4)
     arrays = compiled_terms(terms, MODEL)
@@ -79,7 +39,7 @@ def test_the_extra_residuals_are_the_terms_own_bits():
 @pytest.mark.parametrize("loss", ["cauchy", "geman_mcclure"])
 @pytest.mark.parametrize("n_terms", [0, 1, 3])
 def test_a_compiled_lm_run_is_the_uncompiled_one_bit_for_bit(cut, loss, n_terms, monkeypatch):
-    st, rays, x, terms = _problem(cut)
+    st, rays, x, terms = lm_problem(cut)
     terms = terms[:n_terms]
     fast = levenberg_marquardt(x, rays, st, MODEL, 6, 1.0, terms, loss)
     monkeypatch.setattr(fit_solver, "compiled_terms", lambda *a: None)
@@ -105,7 +65,7 @@ class _Flat:
 
 
 def test_a_term_without_a_compiled_form_takes_the_uncompiled_path():
-    st, rays, x, terms = _problem(cut=False)
+    st, rays, x, terms = lm_problem(cut=False)
     assert compiled_terms([terms[0], _Flat()], MODEL) is None
     xs, cost = levenberg_marquardt(x, rays, st, MODEL, 3, 1.0, [_Flat()])
     assert xs.shape == x.shape and np.isfinite(cost).all()
@@ -114,9 +74,9 @@ def test_a_term_without_a_compiled_form_takes_the_uncompiled_path():
 _FRESH = """
 import sys
 sys.path.insert(0, {tests!r})
-from test_lm_step import MODEL, _problem
+from perception_helpers import MODEL, lm_problem
 from suture_bt.perception.fit_solver import levenberg_marquardt
-st, rays, x, terms = _problem(True)
+st, rays, x, terms = lm_problem(True)
 print(levenberg_marquardt(x, rays, st, MODEL, 2, 1.0, terms)[1].shape)
 """
 
@@ -135,7 +95,7 @@ def test_a_trial_gives_each_pose_the_bits_it_gets_alone_and_on_any_number_of_thr
     """A trial's poses run on numba's threads (one pose: on the caller's); each pose's
     results are those of a trial of that pose alone (the serial path), whatever the thread
     count, with a step taken and with every term the fit uses."""
-    st, rays, x, terms = _problem(cut)
+    st, rays, x, terms = lm_problem(cut)
     extras = terms
     n_edge = len(rays)
     extra_w = np.ascontiguousarray(np.concatenate([e.column_weights(n_edge) for e in extras]))

@@ -3,10 +3,16 @@ mirror twins, and a prior the image contradicts is a refusal naming it, never an
 
 import numpy as np
 import pytest
-from perception_helpers import MODEL, _scene_1080p, _tip_disc_hidden, _tip_hidden, pose_errors
+from perception_helpers import (
+    MODEL,
+    _scene_1080p,
+    _tip_disc_hidden,
+    arc_point,
+    pose_errors,
+    twin_case,
+)
 from scipy.spatial.transform import Rotation
 
-from suture_bt.perception import pose_fit
 from suture_bt.perception.arc_geometry import arc_distance, plane_crossings
 from suture_bt.perception.needle_prior import (
     MAX_PRIOR_COST_RATIO,
@@ -24,42 +30,25 @@ from suture_bt.perception.pose_fit import NeedleNotFound, PoseFitter
 from suture_bt.transforms import make_transform
 
 
-def _twin_case(monkeypatch):
-    """Tip hidden, a misleading alternative and no second search (nor the one run when the
-    best pose's ends lie far from the keypoints, since session 40): the unconstrained fit
-    without the twin probe answers the tilt-mirror twin (> 10 mm off; see test_pose_fit's
-    mirror-twin test; with the probe, session 27's, it finds the needle)."""
-    monkeypatch.setattr(pose_fit, "RESEED_MOVED_PX", float("inf"))
-    st, T, left, right, ends = _scene_1080p(10, 0.0)
-    occ, short, _ = _tip_hidden(st, T, left, right, ends)
-    alt = [tuple(ends + np.array([[30.0, 10.0], [-20.0, 25.0]]))]
-    kw = dict(alternatives=alt, hidden_end=False)
-    return st, T, occ, short, kw
-
-
 def _world(st, T_cam):
     return st.left.T_world_cam @ T_cam
 
 
-def _arc_point(T_world, angle):
-    return T_world[:3, :3] @ MODEL.point_at(angle) + T_world[:3, 3]
-
-
 def test_arc_distance_is_zero_on_the_wire_and_the_offset_off_it():
     T = make_transform(np.eye(3), (0.01, 0.02, 0.1))
-    on = _arc_point(T, 2.0)
+    on = arc_point(T, 2.0)
     assert arc_distance(on, T, MODEL) < 1e-6
     off = on + np.array([0.0, 0.0, 0.004])  # out of the arc's plane
     assert arc_distance(off, T, MODEL) == pytest.approx(0.004, abs=1e-5)
 
 
 def test_held_prior_turns_the_mirror_twin_into_the_right_answer(monkeypatch):
-    st, T, occ, short, kw = _twin_case(monkeypatch)
+    st, T, occ, short, kw = twin_case(monkeypatch)
     free = PoseFitter(st, MODEL, probe_twin=False).fit(*occ, short, **kw)
     assert pose_errors(free.T_cam_needle, T)[0] > 10.0  # the twin, unconstrained
     assert free.prior_misses == ()
     # The arm holds the wire near its base (the visible part), 1 mm off: tolerance 2 mm.
-    pinch = _arc_point(_world(st, T), MODEL.base_angle - 0.4) + np.array([0.0, 0.001, 0.0])
+    pinch = arc_point(_world(st, T), MODEL.base_angle - 0.4) + np.array([0.0, 0.001, 0.0])
     held = HeldPrior("psm2", pinch, tolerance=0.002)
     res = PoseFitter(st, MODEL).fit(*occ, short, priors=[held], **kw)
     pos, ang = pose_errors(res.T_cam_needle, T)
@@ -70,7 +59,7 @@ def test_held_prior_turns_the_mirror_twin_into_the_right_answer(monkeypatch):
 def test_between_near_tied_twins_the_prior_not_the_cost_decides(monkeypatch):
     """With the second search the fit's two final candidates are the needle and a twin 18 mm /
     130 deg away costing only a hair more (ambiguity 5e-4): a coin toss the prior settles."""
-    st, T, occ, short, kw = _twin_case(monkeypatch)
+    st, T, occ, short, kw = twin_case(monkeypatch)
     kw["hidden_end"] = True
     free = PoseFitter(st, MODEL).fit(*occ, short, **kw)
     assert pose_errors(free.T_cam_needle, T)[0] < 1.0
@@ -78,10 +67,10 @@ def test_between_near_tied_twins_the_prior_not_the_cost_decides(monkeypatch):
     assert free.ambiguity < 0.1 * free.cost
     assert len(free.candidate_costs) == len(free.candidates)
     assert min(free.candidate_costs) == pytest.approx(free.cost)
-    on_twin = HeldPrior("psm1", _arc_point(_world(st, twin), 2.0), tolerance=0.002)
+    on_twin = HeldPrior("psm1", arc_point(_world(st, twin), 2.0), tolerance=0.002)
     res = PoseFitter(st, MODEL).fit(*occ, short, priors=[on_twin], **kw)
     assert pose_errors(res.T_cam_needle, twin)[0] < 0.5
-    on_needle = HeldPrior("psm1", _arc_point(_world(st, T), 2.0), tolerance=0.002)
+    on_needle = HeldPrior("psm1", arc_point(_world(st, T), 2.0), tolerance=0.002)
     res = PoseFitter(st, MODEL).fit(*occ, short, priors=[on_needle], **kw)
     # The same candidate, its loosely seen pose pulled towards the needle by the prior's soft
     # term (prior_term): 0.54 mm / 3.5 deg off without the prior, 0.36 mm / 2.3 deg with it.
@@ -96,7 +85,7 @@ def test_a_prior_chooses_among_poses_the_image_explains_almost_as_well_and_no_fu
     prior but explains the image much worse is a refusal naming the prior."""
     T = make_transform(np.eye(3), (0.01, 0.02, 0.1))
     other = make_transform(np.eye(3), (0.03, 0.02, 0.1))  # 20 mm away
-    held = HeldPrior("psm1", _arc_point(other, 2.0), tolerance=0.002)
+    held = HeldPrior("psm1", arc_point(other, 2.0), tolerance=0.002)
     poses = np.stack([T, other])
     b, ok, _ = choose_answer(poses, np.array([1.0, 1.1]), [held], MODEL)
     assert b == 1 and ok.tolist() == [False, True]
@@ -106,9 +95,9 @@ def test_a_prior_chooses_among_poses_the_image_explains_almost_as_well_and_no_fu
 
 
 def test_port_and_predicted_pose_priors_choose_the_right_twin(monkeypatch):
-    st, T, occ, short, kw = _twin_case(monkeypatch)
+    st, T, occ, short, kw = twin_case(monkeypatch)
     Tw = _world(st, T)
-    port = PortPrior("entry2", _arc_point(Tw, MODEL.tip_angle + 0.5), tolerance=0.003)
+    port = PortPrior("entry2", arc_point(Tw, MODEL.tip_angle + 0.5), tolerance=0.003)
     res = PoseFitter(st, MODEL).fit(*occ, short, priors=[port], **kw)
     assert pose_errors(res.T_cam_needle, T)[0] < 1.0
     guess = Tw.copy()
@@ -119,8 +108,8 @@ def test_port_and_predicted_pose_priors_choose_the_right_twin(monkeypatch):
 
 
 def test_a_prior_the_image_contradicts_is_refused_with_its_reason(monkeypatch):
-    st, T, occ, short, kw = _twin_case(monkeypatch)
-    far = _arc_point(_world(st, T), 2.0) + np.array([0.0, 0.0, 0.02])
+    st, T, occ, short, kw = twin_case(monkeypatch)
+    far = arc_point(_world(st, T), 2.0) + np.array([0.0, 0.0, 0.02])
     with pytest.raises(
         PriorContradicted,
         match=r"psm2's pinch point: nearest \d+\.\d mm, "
@@ -143,7 +132,7 @@ def test_a_predicted_pose_also_fixes_which_end_is_the_base():
 
 
 def test_without_priors_the_fit_is_unchanged(monkeypatch):
-    st, T, occ, short, kw = _twin_case(monkeypatch)
+    st, T, occ, short, kw = twin_case(monkeypatch)
     a = PoseFitter(st, MODEL).fit(*occ, short, **kw)
     b = PoseFitter(st, MODEL).fit(*occ, short, priors=(), **kw)
     np.testing.assert_array_equal(a.T_cam_needle, b.T_cam_needle)
@@ -226,7 +215,7 @@ def test_across_jaws_prior_is_signed_once_the_ends_are_known_and_not_before():
 
 def test_across_jaws_prior_turns_the_mirror_twin_into_the_right_answer(monkeypatch):
 
-    st, T, occ, short, kw = _twin_case(monkeypatch)
+    st, T, occ, short, kw = twin_case(monkeypatch)
     Tw = _world(st, T)
     free = PoseFitter(st, MODEL, probe_twin=False).fit(*occ, short, **kw)
     assert pose_errors(free.T_cam_needle, T)[0] > 10.0  # the twin, unconstrained
@@ -261,12 +250,12 @@ def test_port_prior_with_a_normal_asks_the_wire_to_cross_the_port_plane():
     the rest of it on the outside (the edge-on twin of a needle in a port), is not in it."""
     T = make_transform(np.eye(3), (0.0, 0.0, 0.1))
     a = MODEL.tip_angle + 0.6
-    at = _arc_point(T, a)
+    at = arc_point(T, a)
     inward = T[:3, :3] @ MODEL.tangent_at(a)  # the wire goes on along its tangent
     port = PortPrior("entry1", at, tolerance=0.003, normal=-inward)
     assert port.miss(T, MODEL) < 0.01
     assert len(plane_crossings(T, MODEL, at, -inward)) == 1
-    tip = _arc_point(T, MODEL.tip_angle)
+    tip = arc_point(T, MODEL.tip_angle)
     # The port at the tip, its outward normal along the wire's way back: every other point
     # of the arc lies outside, so nothing crosses the surface.
     back = T[:3, :3] @ MODEL.tangent_at(MODEL.tip_angle)
@@ -280,10 +269,10 @@ def test_port_prior_with_a_normal_asks_the_wire_to_cross_the_port_plane():
 def test_a_held_place_measures_the_slide_along_the_arc_modulo_the_swap():
     T = make_transform(np.eye(3), (0.01, 0.02, 0.1))
     a = MODEL.tip_angle + 0.4
-    pinch = _arc_point(T, a)
+    pinch = arc_point(T, a)
     held = HeldPrior("psm1", pinch, 0.001, arc_angle=a, arc_tolerance=0.0005)
     assert held.miss(T, MODEL) < 1e-6
-    slid = _arc_point(T, a + 0.1)  # the same circle, the pinch 1.02 mm further along
+    slid = arc_point(T, a + 0.1)  # the same circle, the pinch 1.02 mm further along
     assert HeldPrior("psm1", slid, 0.001).miss(T, MODEL) < 1e-6  # the point alone: on it
     far = HeldPrior("psm1", slid, 0.001, arc_angle=a, arc_tolerance=0.0005)
     assert far.slide(T, MODEL) == pytest.approx(0.1 * MODEL.radius)
@@ -305,7 +294,7 @@ def test_the_default_held_place_bound_covers_the_trees_largest_measured_grasp_mi
     T = make_transform(np.eye(3), (0.01, 0.02, 0.1))
     a = MODEL.tip_angle + 0.6
     for off_mm, ok in ((0.81, True), (1.2, False)):
-        held_at = _arc_point(T, a + off_mm * 1e-3 / MODEL.radius)
+        held_at = arc_point(T, a + off_mm * 1e-3 / MODEL.radius)
         prior = HeldPrior("psm1", held_at, 0.001, arc_angle=a)
         assert (prior.miss(T, MODEL) <= 1.0) == ok
 
@@ -320,7 +309,7 @@ def test_a_held_place_pins_a_needle_whose_ends_are_both_hidden(seed):
         _tip_disc_hidden(_tip_disc_hidden(v, ends, 0.3), ends[::-1], 0.3) for v in (left, right)
     ]
     a = MODEL.tip_angle + 0.6
-    pinch = _arc_point(_world(st, T), a)
+    pinch = arc_point(_world(st, T), a)
     point_only = HeldPrior("psm1", pinch, 0.001)
     placed = HeldPrior("psm1", pinch, 0.001, arc_angle=a, arc_tolerance=0.0005)
     fit = PoseFitter(st, MODEL).fit(*both, None, priors=[point_only], hidden_end=True)

@@ -2,8 +2,7 @@
 nearest a port, placed where the needle is held."""
 
 import numpy as np
-from perception_helpers import MODEL
-from test_needle_prior import _arc_point
+from perception_helpers import MODEL, arc_point
 
 from suture_bt.perception.needle_prior import AcrossJawsPrior, HeldPrior, PortPrior
 from suture_bt.perception.prior_seeds import SEED_PLACES, SEED_TURNS, seed_poses
@@ -19,7 +18,7 @@ def test_seed_poses_pass_the_pinch_point_with_the_held_face_and_through_the_port
     assert max(held.miss(T, MODEL) for T in seeds) < 1e-9
     assert max(jaws.angle_deg(T) for T in seeds) < 1e-6
     assert len(seed_poses([held], MODEL)) == 0  # the face is needed to pin the plane
-    port_at = _arc_point(seeds[7], MODEL.tip_angle + 0.3)
+    port_at = arc_point(seeds[7], MODEL.tip_angle + 0.3)
     port = PortPrior("entry1", port_at, 0.003)
     near = seed_poses([held, jaws, port], MODEL)
     assert len(near) == 2 * SEED_PLACES  # the two circles through pinch and port

@@ -4,7 +4,7 @@ image and the priors let it slide along its circle that way, and kept when somet
 
 import numpy as np
 import pytest
-from test_unseen_arc import MODEL, PINK, _scene
+from perception_helpers import MODEL, PINK, face_on_scene
 
 from suture_bt.perception.colour_refine import ColourRule
 from suture_bt.perception.exposure_gate import ExposureGate
@@ -19,7 +19,7 @@ from suture_bt.perception.tissue_slide import (
 
 
 def _seen_end(st, T) -> float:
-    """The arc angle of the needle's left end in the left eye (``_scene``'s jaw covers the
+    """The arc angle of the needle's left end in the left eye (``face_on_scene``'s jaw covers the
     right half)."""
     T_world = st.left.T_world_cam @ T
     ends = {MODEL.tip_angle: MODEL.tip, MODEL.base_angle: MODEL.base}
@@ -45,7 +45,7 @@ def _tissue_past(st, T, angle: float):
 
 
 def _slide(occluder: bool, priors=()):
-    st, T, images, views = _scene(occluder=occluder, background=PINK)
+    st, T, images, views = face_on_scene(occluder=occluder, background=PINK)
     gate = ExposureGate(st, MODEL, ColourRule(), tissue=_tissue_past(st, T, _seen_end(st, T)))
     return tissue_slide(gate, images, views, T, priors)
 
@@ -63,7 +63,7 @@ def test_a_needle_whose_other_end_is_seen_is_pinned():
 
 
 def test_a_held_place_pins_the_slide():
-    st, T, _, _ = _scene(occluder=True, background=PINK)
+    st, T, _, _ = face_on_scene(occluder=True, background=PINK)
     T_world = st.left.T_world_cam @ T
     middle = 0.5 * (MODEL.tip_angle + MODEL.base_angle)
     pinch = T_world[:3, :3] @ MODEL.point_at(middle) + T_world[:3, 3]
@@ -72,7 +72,7 @@ def test_a_held_place_pins_the_slide():
 
 
 def test_no_tissue_known_means_no_slide():
-    st, T, images, views = _scene(occluder=True, background=PINK)
+    st, T, images, views = face_on_scene(occluder=True, background=PINK)
     slide = tissue_slide(ExposureGate(st, MODEL, ColourRule()), images, views, T)
     assert slide == TissueSlide()
     check_tissue_slide(TissueSlide(40.0, 0.0), limit_deg=float("inf"))

@@ -1,13 +1,20 @@
 """The unseen part of a fitted needle must be hidden by something (issue 14 item 4)."""
 
 import numpy as np
-from perception_helpers import pose_errors, recorded_fit, stereo
+from perception_helpers import (
+    GREY,
+    MODEL,
+    PINK,
+    _scene_1080p,
+    face_on_scene,
+    images_with_cover,
+    pose_errors,
+    recorded_fit,
+    twin_case,
+)
 
-from suture_bt.geometry import NeedleModel
 from suture_bt.perception.answer_gates import AnswerGates
 from suture_bt.perception.fit_attempts import FitAttempts
-from suture_bt.perception.mask_view import MaskView
-from suture_bt.perception.needle_projection import rasterize_needle
 from suture_bt.perception.pose_fit import NeedleNotFound
 from suture_bt.perception.unseen_arc import (
     EXPOSED,
@@ -17,11 +24,7 @@ from suture_bt.perception.unseen_arc import (
     below_port_planes,
     hiders,
 )
-from suture_bt.transforms import invert, make_transform
 
-MODEL = NeedleModel()
-PINK = (200, 110, 110)
-GREY = (150, 150, 155)
 HW = 2.0  # the wire's half width at 80 mm, 640×480 (px, rounded up)
 
 
@@ -30,37 +33,15 @@ def _rz(a: float) -> np.ndarray:
     return np.array([[c, -s, 0], [s, c, 0], [0, 0, 1.0]])
 
 
-def _scene(occluder: bool = False, background=(0, 0, 0)):
-    """A needle 80 mm in front of the left eye, face-on, grey on ``background``; with
-    ``occluder`` a grey slab (a jaw) covers the image right of the needle's middle column
-    and that part of the wire is left out of the mask."""
-    st = stereo(640, 480)
-    T = make_transform(np.eye(3), (0.0, 0.0, 0.08))
-    imgs, views = [], []
-    for cam in (st.left, st.right):
-        T_eye = invert(cam.T_world_cam) @ st.left.T_world_cam @ T
-        img = np.zeros((cam.height, cam.width, 3), np.uint8)
-        img[:] = background
-        m = rasterize_needle(cam, T_eye, MODEL)
-        img[m] = GREY
-        if occluder:
-            col = int(np.median(np.nonzero(m)[1]))
-            img[:, col:] = GREY
-            m[:, col:] = False
-        imgs.append(img)
-        views.append(MaskView(m))
-    return st, T, tuple(imgs), tuple(views)
-
-
 def test_the_true_pose_is_seen_everywhere():
-    st, T, imgs, views = _scene()
+    st, T, imgs, views = face_on_scene()
     e = arc_exposure(imgs, views, st, T, MODEL, HW)
     assert all((c == SEEN).all() for c in e.classes) and e.worst == 0.0
 
 
 def test_a_pose_turned_within_its_plane_runs_over_background():
     """A slide along the circle: the circle right, its ends 7 mm along it off the needle."""
-    st, T, imgs, views = _scene()
+    st, T, imgs, views = face_on_scene()
     turned = T.copy()
     turned[:3, :3] = _rz(0.7)
     e = arc_exposure(imgs, views, st, turned, MODEL, HW)
@@ -68,7 +49,7 @@ def test_a_pose_turned_within_its_plane_runs_over_background():
 
 
 def test_a_jaw_in_front_hides_the_unseen_part():
-    st, T, imgs, views = _scene(occluder=True)
+    st, T, imgs, views = face_on_scene(occluder=True)
     e = arc_exposure(imgs, views, st, T, MODEL, HW)
     assert e.both == 0.0 and (e.classes[0] == HIDDEN).sum() > 10
 
@@ -76,7 +57,7 @@ def test_a_jaw_in_front_hides_the_unseen_part():
 def test_specks_of_grey_in_the_tissue_hide_nothing():
     """Dim tissue's sensor noise passes the colour test in specks (90509673 `held_presented`
     #1, light gain 0.33): a slid pose over them is still exposed; the jaw still hides."""
-    st, T, imgs, views = _scene(background=PINK)
+    st, T, imgs, views = face_on_scene(background=PINK)
     rng = np.random.default_rng(5)
     speckled = []
     for img in imgs:
@@ -88,7 +69,7 @@ def test_specks_of_grey_in_the_tissue_hide_nothing():
     turned[:3, :3] = _rz(0.7)
     e = arc_exposure(tuple(speckled), views, st, turned, MODEL, HW)
     assert e.both > 0.004 and min(e.end_exposed) > 0.004
-    st, T, imgs, views = _scene(occluder=True, background=PINK)
+    st, T, imgs, views = face_on_scene(occluder=True, background=PINK)
     e = arc_exposure(imgs, views, st, T, MODEL, HW)
     assert e.both == 0.0 and (e.classes[0] == HIDDEN).sum() > 10
 
@@ -105,7 +86,7 @@ def test_hiders_drop_specks_but_keep_blobs_and_what_the_window_cuts():
 
 
 def test_tissue_hides_only_where_the_needle_may_be_inside_it():
-    st, T, imgs, views = _scene(background=PINK)
+    st, T, imgs, views = face_on_scene(background=PINK)
     turned = T.copy()
     turned[:3, :3] = _rz(0.7)
     assert arc_exposure(imgs, views, st, turned, MODEL, HW).both > 0.004
@@ -120,42 +101,16 @@ def test_tissue_hides_only_where_the_needle_may_be_inside_it():
     assert (EXPOSED not in e.classes[0]) and (SEEN in e.classes[0])
 
 
-def _images_with_cover(st, full, seen, px: int = 6):
-    """Grey needle pixels on black, and over each eye's hidden wire (full minus seen mask)
-    a grey cover ``px`` wider (a jaw just over the tip)."""
-    import cv2
-
-    out = []
-    for f, v in zip(full, seen, strict=True):
-        img = np.zeros((st.left.height, st.left.width, 3), np.uint8)
-        x0, y0 = f.origin
-        h, w = f.mask.shape
-        hidden = np.zeros(img.shape[:2], np.uint8)
-        hidden[y0 : y0 + h, x0 : x0 + w] = f.mask
-        sx, sy = v.origin
-        sh, sw = v.mask.shape
-        vis = np.zeros(img.shape[:2], bool)
-        vis[sy : sy + sh, sx : sx + sw] = v.mask
-        hidden[vis] = 0
-        cover = cv2.dilate(hidden, np.ones((2 * px + 1, 2 * px + 1), np.uint8)).astype(bool)
-        img[cover | vis] = GREY
-        out.append(img)
-    return tuple(out)
-
-
 def test_the_mirror_twin_of_a_needle_behind_a_jaw_runs_over_background(monkeypatch):
     """test_needle_prior's twin case: the tip half behind a jaw (grey, just over the hidden
     wire), the fit without priors answers the tilt-mirror twin > 10 mm off: the needle's
     unseen part is under the jaw, the twin's lies over the black background."""
-    from perception_helpers import _scene_1080p
-    from test_needle_prior import _twin_case
-
     from suture_bt.perception.exposure_gate import MAX_EXPOSED
     from suture_bt.perception.pose_fit import PoseFitter
 
-    st, T, occ, short, kw = _twin_case(monkeypatch)
+    st, T, occ, short, kw = twin_case(monkeypatch)
     _, _, left, right, _ = _scene_1080p(10, 0.0)
-    imgs = _images_with_cover(st, (left, right), occ, px=2)
+    imgs = images_with_cover(st, (left, right), occ, px=2)
     # The twin the fit answers without its rival probe (with it, the fit moves to a cheaper
     # twin 18 mm / 132 deg off that exposes 5 mm and whose rival refuses it anyway) and
     # without its twin probe and its wide re-descent (each finds the needle).

@@ -5,10 +5,15 @@ needle answered 5.9 deg off) is refused for its valley."""
 
 import numpy as np
 import pytest
-from perception_helpers import pose_errors, recorded_fit
+from perception_helpers import (
+    MODEL,
+    attempts_with_gates,
+    clean_outline_args,
+    lm_problem,
+    pose_errors,
+    recorded_fit,
+)
 from scipy.spatial.transform import Rotation
-from test_fit_attempts import _args, _attempts
-from test_lm_step import MODEL, _problem
 
 from suture_bt.perception import fit_solver
 from suture_bt.perception.answer_gates import AnswerGates
@@ -61,7 +66,7 @@ def test_the_compiled_away_term_gives_the_numpy_terms_residuals():
     T = _pose([0.3, -1.1, 0.7])
     term = AwayTerm(T[:3, :3], VALLEY_DEG)
     steps = np.concatenate([np.zeros((1, 6)), np.diag(fit_solver.FD_STEPS)])
-    st, _, x, _ = _problem(cut=False)
+    st, _, x, _ = lm_problem(cut=False)
     poses = params_to_pose(x[:, None] + steps[None], st.left, MODEL).reshape(-1, 4, 4)
     poses = np.concatenate([poses, valley_starts(T), T[None]])
     E = _extra_residuals(
@@ -73,18 +78,18 @@ def test_the_compiled_away_term_gives_the_numpy_terms_residuals():
 
 
 def test_a_clean_outline_has_no_near_valley_and_is_answered():
-    st, T, args = _args()
-    fit = _attempts(st)(*args)
+    st, T, args = clean_outline_args()
+    fit = attempts_with_gates(st)(*args)
     assert pose_errors(fit.T_cam_needle, T)[1] < 1.0
     assert fit.valley_ratio > 1.5 and fit.valley_deg >= VALLEY_DEG - 0.5
     # The gate refuses any answer at or under its limit, naming the tilted pose.
     with pytest.raises(NeedleNotFound, match="a pose tilted 5 deg from the answer"):
-        _attempts(st, max_valley_ratio=fit.valley_ratio)(*args)
+        attempts_with_gates(st, max_valley_ratio=fit.valley_ratio)(*args)
 
 
 def test_a_fitter_that_does_not_probe_has_no_valley():
-    st, _, args = _args()
-    attempts = _attempts(st)
+    st, _, args = clean_outline_args()
+    attempts = attempts_with_gates(st)
     attempts.fitter.probe_valley = False
     fit = attempts(*args)
     assert fit.valley_ratio == float("inf") and np.isnan(fit.valley_deg)
