@@ -37,6 +37,7 @@ from suture_bt.sim.psm_body import LINK_JAWS, LINK_TIP, PSMBody
 from suture_bt.sim.quiet import quiet_fd
 from suture_bt.sim.rendering import load_renderer
 from suture_bt.sim.scene import SceneConfig, default_scene
+from suture_bt.sim.sim_clock import PeriodicCallbacks, SimClock
 from suture_bt.sim.simulated_psm import SimulatedPSM
 from suture_bt.transforms import invert, make_transform, pose_to_transform
 
@@ -71,25 +72,6 @@ class KnownTask:
     needle: NeedleModel = field(default_factory=NeedleModel)
 
 
-class SimClock:
-    """Simulated time, counted in whole physics ticks (no drift)."""
-
-    def __init__(self, dt: float):
-        self.dt = dt
-        self.ticks = 0
-
-    def now(self) -> float:
-        return self.ticks * self.dt
-
-
-@dataclass
-class _Periodic:
-    period_ticks: int
-    next_tick: int
-    callback: Callable[[float], None]
-    order: int
-
-
 class World:
     """The whole simulated scene; build it with :meth:`from_scene`."""
 
@@ -113,8 +95,7 @@ class World:
         pb.setTimeStep(self.dt, physicsClientId=self.client)
         self.rng = np.random.default_rng(self.scene.seed)
         self.task = KnownTask(PhantomModel(self.scene.phantom.T_world_phantom))
-        self._periodics: list[_Periodic] = []
-        self._next_order = 0
+        self._periodics = PeriodicCallbacks(self.clock)
         self._target_time = 0.0
         sv = self.scene.servo
         params = ServoParams(
@@ -273,22 +254,11 @@ class World:
         ``period`` must be a whole number of physics ticks (e.g. 0.002-0.005 s at 1 kHz).
         Callbacks due in the same tick run in registration order, before the arms move.
         """
-        ticks = period / self.dt
-        if not np.isfinite(ticks) or ticks < 0.999 or abs(ticks - round(ticks)) > 1e-6:
-            raise ValueError(
-                f"period {period!r} s is not a positive multiple of the physics step {self.dt} s"
-            )
-        handle = _Periodic(int(round(ticks)), self.clock.ticks + 1, callback, self._next_order)
-        self._next_order += 1
-        self._periodics.append(handle)
-        return handle
+        return self._periodics.add(period, callback)
 
     def remove_periodic(self, handle: object) -> None:
         """Stop a periodic callback (unknown handles are an error)."""
-        try:
-            self._periodics.remove(handle)
-        except ValueError:
-            raise ValueError("remove_periodic: unknown handle") from None
+        self._periodics.remove(handle)
 
     def step(self, duration: float) -> None:
         """Advance simulated time by ``duration`` seconds (rounded to whole physics ticks)."""
@@ -305,10 +275,7 @@ class World:
         self.clock.ticks += 1
         tick = self.clock.ticks
         t = tick * self.dt
-        for p in list(self._periodics):
-            if tick >= p.next_tick and p in self._periodics:
-                p.next_tick += p.period_ticks
-                p.callback(t)
+        self._periodics.run_due(tick, t)
         for arm in self.arms.values():
             arm.update(t, self.dt)
         self._grasp_and_release()
