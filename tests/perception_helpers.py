@@ -224,8 +224,7 @@ def lm_problem(cut: bool):
            for c in (st.left, st.right)]  # fmt: skip
     T_world = st.left.T_world_cam @ T
     a = MODEL.tip_angle + 0.6
-    pinch = T_world[:3, :3] @ MODEL.point_at(a) + T_world[:3, 3]
-    port = T_world[:3, :3] @ MODEL.point_at(a + 0.8) + T_world[:3, 3]
+    pinch, port = arc_point(T_world, a), arc_point(T_world, a + 0.8)
     priors = [HeldPrior("psm1", pinch, 0.001, arc_angle=a), PortPrior("exit1", port, 0.003)]
     keypoints = EndPriorTerm(st, MODEL, (kps[0][:1] + 1.5, kps[1]))
     place = HeldPlaceTerm(priors, st.left.T_cam_world, MODEL)
